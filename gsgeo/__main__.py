@@ -1,0 +1,5 @@
+import sys
+
+from gsgeo.cli import main
+
+sys.exit(main())

@@ -1,0 +1,47 @@
+"""The `gsgeo` command. Each subcommand lives in its own module under gsgeo.commands."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from gsgeo import __version__
+from gsgeo.errors import GsgeoError
+
+#: Subcommand name -> module in gsgeo.commands providing ``add_parser(sub)`` and ``run(args)``.
+COMMANDS = {
+    "solve": "gsgeo.commands.solve",
+}
+
+EXIT_USAGE = 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="gsgeo",
+        description="Survey-grade point measurement in georeferenced 3D Gaussian Splatting scenes.",
+    )
+    parser.add_argument("--version", action="version", version=f"gsgeo {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for module in COMMANDS.values():
+        importlib.import_module(module).add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except GsgeoError as exc:
+        print(f"gsgeo {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("gsgeo: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

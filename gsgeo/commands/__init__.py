@@ -1,0 +1,1 @@
+"""Subcommands of the `gsgeo` command line, one module each."""

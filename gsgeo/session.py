@@ -1,0 +1,234 @@
+"""The session JSON of DESIGN.md ("Interfaces"): rays of measured points, lines and polygons.
+
+`load_session` / `parse_session` validate the whole document and raise
+:class:`~gsgeo.errors.InputError` with the JSON path of the first problem
+(e.g. ``points[2].rays[0].direction``), so a surveyor can find it in the file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gsgeo.errors import InputError
+
+IDENTITY16 = (1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0)
+
+
+@dataclass
+class Ray:
+    """One aim: rendered-ECEF origin and direction (metres), optional pixel metadata."""
+
+    origin: np.ndarray
+    direction: np.ndarray
+    ifov: float | None = None
+    pixel: tuple[float, float] | None = None
+    viewport: tuple[float, float] | None = None
+    model_matrix: np.ndarray | None = None  # 16 numbers, column-major; None = identity
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "origin": [float(v) for v in self.origin],
+            "direction": [float(v) for v in self.direction],
+        }
+        if self.ifov is not None:
+            out["ifov"] = self.ifov
+        if self.pixel is not None:
+            out["pixel"] = list(self.pixel)
+        if self.viewport is not None:
+            out["viewport"] = list(self.viewport)
+        if self.model_matrix is not None:
+            out["model_matrix"] = [float(v) for v in self.model_matrix]
+        return out
+
+
+@dataclass
+class SessionPoint:
+    id: str
+    rays: list[Ray]
+    code: str = ""
+    description: str = ""
+
+
+@dataclass
+class Feature:
+    """A line or polygon given by the ids of its points, in order."""
+
+    id: str
+    points: list[str]
+
+
+@dataclass
+class Session:
+    points: list[SessionPoint]
+    source_crs: str = "EPSG:4978"
+    crs: str | None = None
+    vertical: str | None = None
+    sigma_px: float = 1.0
+    lines: list[Feature] = field(default_factory=list)
+    polygons: list[Feature] = field(default_factory=list)
+
+
+def load_session(path: str | Path) -> Session:
+    """Read and validate a session JSON file."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{p}: is a directory, not a session JSON file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{p}: cannot be read as text: {exc}") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{p}: not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
+    try:
+        return parse_session(doc)
+    except InputError as exc:
+        raise InputError(f"{p}: {exc}") from None
+
+
+def _number(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{where}: expected a number, got {json.dumps(value)[:40]}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise InputError(f"{where}: expected a finite number")
+    return v
+
+
+def _vector(value: Any, n: int, where: str) -> np.ndarray:
+    if not isinstance(value, list) or len(value) != n:
+        raise InputError(f"{where}: expected a list of {n} numbers")
+    return np.array([_number(v, f"{where}[{i}]") for i, v in enumerate(value)])
+
+
+def _text(value: Any, where: str, default: str = "") -> str:
+    if value is None:
+        return default
+    if not isinstance(value, (str, int)) or isinstance(value, bool):
+        raise InputError(f"{where}: expected text")
+    return str(value)
+
+
+def parse_ray(doc: Any, where: str = "ray") -> Ray:
+    """Validate one ray object of the session JSON."""
+    if not isinstance(doc, dict):
+        raise InputError(f"{where}: expected an object with origin and direction")
+    for key in ("origin", "direction"):
+        if key not in doc:
+            raise InputError(f"{where}: missing '{key}'")
+    origin = _vector(doc["origin"], 3, f"{where}.origin")
+    direction = _vector(doc["direction"], 3, f"{where}.direction")
+    if not np.any(direction != 0):
+        raise InputError(f"{where}.direction: is a zero vector")
+    ifov = None
+    if doc.get("ifov") is not None:
+        ifov = _number(doc["ifov"], f"{where}.ifov")
+        if ifov <= 0:
+            raise InputError(f"{where}.ifov: must be a positive angle in radians per pixel")
+    pixel = viewport = mm = None
+    if doc.get("pixel") is not None:
+        pixel = tuple(_vector(doc["pixel"], 2, f"{where}.pixel").tolist())
+    if doc.get("viewport") is not None:
+        viewport = tuple(_vector(doc["viewport"], 2, f"{where}.viewport").tolist())
+    if doc.get("model_matrix") is not None:
+        mm = _vector(doc["model_matrix"], 16, f"{where}.model_matrix")
+        if mm[3] != 0 or mm[7] != 0 or mm[11] != 0 or mm[15] == 0:
+            raise InputError(
+                f"{where}.model_matrix: not an affine 4x4 matrix in column-major order "
+                "(elements 3, 7, 11 must be 0 and element 15 non-zero)"
+            )
+    return Ray(origin, direction, ifov, pixel, viewport, mm)
+
+
+def parse_point(doc: Any, where: str = "point") -> SessionPoint:
+    """Validate one point object (id, code, description, rays)."""
+    if not isinstance(doc, dict):
+        raise InputError(f"{where}: expected an object with id and rays")
+    if "id" not in doc:
+        raise InputError(f"{where}: missing 'id'")
+    pid = _text(doc["id"], f"{where}.id")
+    if not pid.strip():
+        raise InputError(f"{where}.id: must not be empty")
+    rays = doc.get("rays")
+    if not isinstance(rays, list):
+        raise InputError(f"{where}.rays: expected a list of rays")
+    return SessionPoint(
+        id=pid,
+        rays=[parse_ray(r, f"{where}.rays[{i}]") for i, r in enumerate(rays)],
+        code=_text(doc.get("code"), f"{where}.code"),
+        description=_text(doc.get("description"), f"{where}.description"),
+    )
+
+
+def _features(doc: Any, key: str) -> list[Feature]:
+    items = doc.get(key) or []
+    if not isinstance(items, list):
+        raise InputError(f"{key}: expected a list")
+    out = []
+    for i, item in enumerate(items):
+        where = f"{key}[{i}]"
+        if not isinstance(item, dict) or "id" not in item:
+            raise InputError(f"{where}: expected an object with id and points")
+        pts = item.get("points")
+        if not isinstance(pts, list) or not pts:
+            raise InputError(f"{where}.points: expected a list of point ids")
+        out.append(Feature(_text(item["id"], f"{where}.id"),
+                           [_text(p, f"{where}.points[{j}]") for j, p in enumerate(pts)]))
+    return out
+
+
+def parse_session(doc: Any) -> Session:
+    """Validate a decoded session document."""
+    if not isinstance(doc, dict):
+        raise InputError("the session must be a JSON object with a 'points' list")
+    pts = doc.get("points")
+    if not isinstance(pts, list):
+        raise InputError("points: expected a list of points")
+    points = [parse_point(p, f"points[{i}]") for i, p in enumerate(pts)]
+    seen: set[str] = set()
+    for i, p in enumerate(points):
+        if p.id in seen:
+            raise InputError(f"points[{i}].id: duplicate point id '{p.id}'")
+        seen.add(p.id)
+    sigma_px = 1.0
+    if doc.get("sigma_px") is not None:
+        sigma_px = _number(doc["sigma_px"], "sigma_px")
+        if sigma_px <= 0:
+            raise InputError("sigma_px: must be a positive number of pixels")
+    return Session(
+        points=points,
+        source_crs=_text(doc.get("source_crs"), "source_crs", "EPSG:4978") or "EPSG:4978",
+        crs=_text(doc.get("crs"), "crs") or None,
+        vertical=_text(doc.get("vertical"), "vertical") or None,
+        sigma_px=sigma_px,
+        lines=_features(doc, "lines"),
+        polygons=_features(doc, "polygons"),
+    )
+
+
+def ray_arrays(point: SessionPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Origins (N, 3), directions (N, 3) and ifov (N,) or None of a point's rays, as given.
+
+    The angular model needs ifov on every ray; a point with ifov on some rays only is an error
+    rather than a silent fall-back to the unweighted model.
+    """
+    origins = np.array([r.origin for r in point.rays], dtype=np.float64).reshape(-1, 3)
+    directions = np.array([r.direction for r in point.rays], dtype=np.float64).reshape(-1, 3)
+    have = [r.ifov is not None for r in point.rays]
+    if any(have) and not all(have):
+        missing = ", ".join(str(i + 1) for i, h in enumerate(have) if not h)
+        raise InputError(
+            f"point '{point.id}': ray(s) {missing} have no ifov while others do; "
+            "give ifov on every ray (angular model) or on none (unweighted model)"
+        )
+    ifov = np.array([r.ifov for r in point.rays], dtype=np.float64) if all(have) and have else None
+    return origins, directions, ifov

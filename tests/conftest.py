@@ -1,0 +1,26 @@
+"""Shared fixtures: paths to ../shared data, deterministic random generators."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+SHARED_DATA = SHARED / "data"
+WHITE_SCULPTURE = SHARED_DATA / "white-sculpture"
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20261122)
+
+
+@pytest.fixture
+def white_sculpture() -> Path:
+    """The real 3DGS tileset of ../shared/data; the test is skipped where it is absent."""
+    if not (WHITE_SCULPTURE / "tileset.json").is_file():
+        pytest.skip("../shared/data/white-sculpture is not present beside this checkout")
+    return WHITE_SCULPTURE
