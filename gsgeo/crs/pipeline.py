@@ -1,0 +1,294 @@
+"""The measurement pipeline: a session point's rays -> a georeferenced point in the grid.
+
+rendered ECEF rays --(inverse of each ray's modelMatrix)--> georeferenced ECEF
+--(pyproj topocentric at a provisional point)--> local ENU --gsgeo.solve.intersect-->
+point and covariance in ENU --> ECEF (R^T C R) --to_grid--> E, N, H with covariance.
+
+The ENU origin is the provisional intersection in ECEF, so the solved point sits within
+millimetres of the origin and the ENU solution is well conditioned.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from gsgeo.crs.frames import EnuFrame
+from gsgeo.crs.grid import GridPoint, to_grid, to_grid_many
+from gsgeo.crs.modelmatrix import rendered_to_georeferenced
+from gsgeo.crs.resolve import grid_crs
+from gsgeo.crs.resolve import source_crs as resolve_source
+from gsgeo.crs.transformers import transformer
+from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.session import Session, SessionPoint, ray_arrays
+from gsgeo.solve import IntersectionResult, intersect
+
+#: Keys of the point schema (DESIGN.md), in order.
+RECORD_KEYS = (
+    "point_id", "code", "description", "easting", "northing", "height", "height_type",
+    "vertical_datum", "crs", "sigma_e", "sigma_n", "sigma_h", "cov_ee", "cov_en", "cov_eh",
+    "cov_nn", "cov_nh", "cov_hh", "ellipse_major_95", "ellipse_minor_95",
+    "ellipse_bearing_deg", "sigma0", "n_rays", "max_angle_deg", "rms_m", "max_residual_px",
+    "lon", "lat", "h_wgs84", "operation", "operation_accuracy_m", "measured_at",
+)
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
+
+
+@dataclass
+class Measurement:
+    """A measured point: the ENU solution, the georeferenced ECEF point and the grid point."""
+
+    point_id: str
+    code: str
+    description: str
+    solution: IntersectionResult  # in the local ENU frame
+    enu_origin_ecef: np.ndarray  # (3,)
+    point_ecef: np.ndarray  # (3,) georeferenced ECEF on source_crs, m
+    cov_ecef: np.ndarray  # (3, 3) m^2
+    grid: GridPoint | None
+    ray_origins_ecef: np.ndarray  # (N, 3) georeferenced
+    ray_directions_ecef: np.ndarray  # (N, 3) georeferenced, unit
+    ray_origins_grid: np.ndarray | None  # (N, 3) E, N, H of the camera centres
+    excluded: np.ndarray  # (N,) bool
+    measured_at: str
+    source_crs: str = "EPSG:4978"
+    residuals_m: np.ndarray | None = None  # (N,) every ray, excluded ones too
+    residuals_px: np.ndarray | None = None  # (N,) angular model only
+    outliers: np.ndarray | None = None  # (N,) bool; excluded rays False
+    ifov: np.ndarray | None = None  # (N,)
+    lon: float | None = None  # WGS 84, degrees
+    lat: float | None = None
+    h_wgs84: float | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def n_rays(self) -> int:
+        """Rays used in the solution (excluded ones not counted)."""
+        return int((~self.excluded).sum())
+
+    def record(self) -> dict:
+        """The point-schema row of DESIGN.md, keys in order; grid fields None without a grid."""
+        g = self.grid
+        s = self.solution
+        rec = dict.fromkeys(RECORD_KEYS)
+        rec.update(point_id=self.point_id, code=self.code, description=self.description,
+                   sigma0=float(s.sigma0), n_rays=self.n_rays,
+                   max_angle_deg=float(s.max_angle_deg), rms_m=float(s.rms_m),
+                   max_residual_px=(None if s.residuals_px is None
+                                    else float(np.max(s.residuals_px))),
+                   lon=self.lon, lat=self.lat, h_wgs84=self.h_wgs84,
+                   measured_at=self.measured_at)
+        if g is not None:
+            c = g.covariance
+            rec.update(
+                easting=g.easting, northing=g.northing, height=g.height,
+                height_type=g.height_type, vertical_datum=g.vertical_datum, crs=g.crs,
+                sigma_e=g.sigma_e, sigma_n=g.sigma_n, sigma_h=g.sigma_h,
+                cov_ee=float(c[0, 0]), cov_en=float(c[0, 1]), cov_eh=float(c[0, 2]),
+                cov_nn=float(c[1, 1]), cov_nh=float(c[1, 2]), cov_hh=float(c[2, 2]),
+                ellipse_major_95=g.ellipse_major_95, ellipse_minor_95=g.ellipse_minor_95,
+                ellipse_bearing_deg=g.ellipse_bearing_deg, operation=g.operation,
+                operation_accuracy_m=g.operation_accuracy_m,
+            )
+        return rec
+
+    def to_dict(self) -> dict:
+        """record() plus rays, warnings, 95 % ellipsoid axes and the ENU solution (JSON-ready)."""
+        out = self.record()
+        rays = []
+        for i in range(self.excluded.shape[0]):
+            rays.append({
+                "index": i,
+                "origin_ecef": self.ray_origins_ecef[i].tolist(),
+                "direction_ecef": self.ray_directions_ecef[i].tolist(),
+                "origin_grid": (None if self.ray_origins_grid is None
+                                else self.ray_origins_grid[i].tolist()),
+                "ifov": None if self.ifov is None else float(self.ifov[i]),
+                "residual_px": (None if self.residuals_px is None
+                                else float(self.residuals_px[i])),
+                "residual_m": None if self.residuals_m is None else float(self.residuals_m[i]),
+                "outlier": bool(self.outliers[i]) if self.outliers is not None else False,
+                "excluded": bool(self.excluded[i]),
+            })
+        out["rays"] = rays
+        out["warnings"] = list(self.warnings)
+        out["source_crs"] = self.source_crs
+        out["ellipsoid_axes_95"] = (None if self.grid is None or self.grid.ellipsoid_axes_95 is None
+                                    else self.grid.ellipsoid_axes_95.tolist())
+        out["point_ecef"] = self.point_ecef.tolist()
+        out["cov_ecef"] = self.cov_ecef.tolist()
+        out["enu"] = {
+            "origin_ecef": self.enu_origin_ecef.tolist(),
+            "point": self.solution.point.tolist(),
+            "covariance": self.solution.covariance.tolist(),
+            "model": self.solution.model,
+            "dof": int(self.solution.dof),
+        }
+        return out
+
+
+@dataclass
+class MeasurementFailure:
+    """A point that could not be measured, with the reason."""
+
+    point_id: str
+    error: str
+
+    def to_dict(self) -> dict:
+        return {"point_id": self.point_id, "error": self.error}
+
+
+def _exclusion_mask(exclude: Sequence[int], n: int, pid: str) -> np.ndarray:
+    mask = np.zeros(n, dtype=bool)
+    for k in exclude:
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < n:
+            raise InputError(
+                f"point '{pid}': cannot exclude ray index {k!r}; indices are 0-based, "
+                f"0..{n - 1}"
+            )
+        mask[int(k)] = True
+    if n - mask.sum() < 2:
+        raise InputError(f"point '{pid}': excluding {int(mask.sum())} of {n} rays leaves fewer than 2")
+    return mask
+
+
+def measure_point(
+    point: SessionPoint,
+    *,
+    crs: str | None,
+    vertical: str | None = None,
+    geoid: str | Path | None = None,
+    source_crs: str = "EPSG:4978",
+    sigma_px: float = 1.0,
+    exclude: Sequence[int] = (),
+) -> Measurement:
+    """Measure one session point: rays in rendered ECEF -> point in ECEF and the grid.
+
+    crs None gives no grid output (record() grid fields None, WGS 84 lon/lat/h still set).
+    `exclude` lists 0-based ray indices left out of the solution (reported as excluded).
+    Raises InputError / GeometryError (the rays) or CRSError / DatumError (the CRS).
+    """
+    src_text = source_crs or "EPSG:4978"
+    src = resolve_source(src_text)
+    o_r, d_r, ifov = ray_arrays(point)
+    n = o_r.shape[0]
+    if n < 2:
+        raise InputError(f"point '{point.id}': needs at least 2 rays, has {n}")
+    mask = _exclusion_mask(exclude, n, point.id)
+    keep = ~mask
+    o, d, similar = rendered_to_georeferenced(o_r, d_r, [r.model_matrix for r in point.rays])
+    warnings: list[str] = []
+    if not similar:
+        warnings.append(
+            "a model_matrix is not a rotation with uniform scale: angles between rays are "
+            "distorted, so the angular model (ifov) is only approximate"
+        )
+    f_keep = None if ifov is None else ifov[keep]
+    # Provisional point in ECEF (the solver is rotation invariant and centres its input).
+    provisional = intersect(o[keep], d[keep]).point
+    frame = EnuFrame(provisional, src.id)
+    o_enu = frame.to_enu(o)
+    d_enu = frame.directions_to_enu(d)
+    sol = intersect(o_enu[keep], d_enu[keep], ifov=f_keep, sigma_px=sigma_px)
+    point_ecef = frame.to_ecef(sol.point)
+    cov_ecef = frame.covariance_to_ecef(sol.covariance)
+    warnings += sol.warnings
+
+    # Residuals of every ray (excluded ones too) from the solved point.
+    rel = sol.point - o_enu
+    t = np.einsum("ki,ki->k", rel, d_enu)
+    off = rel - d_enu * t[:, None]
+    res_m = np.sqrt(np.einsum("ki,ki->k", off, off))
+    res_px = None if ifov is None else res_m / (ifov * np.where(t > 0, t, np.nan))
+    outliers = np.zeros(n, dtype=bool)
+    outliers[keep] = sol.outliers
+    if mask.any():
+        warnings.append(
+            f"ray(s) {', '.join(str(i + 1) for i in np.flatnonzero(mask))} excluded by request"
+        )
+
+    grid = None
+    origins_grid = None
+    if crs:
+        grid = to_grid(point_ecef, cov_ecef, crs, vertical=vertical, geoid=geoid,
+                       source_crs=src.id)
+        warnings += grid.warnings
+        lon, lat, h84 = grid.lon, grid.lat, grid.h_wgs84
+        try:
+            gm = to_grid_many(o, None, crs, vertical=vertical, geoid=geoid, source_crs=src.id)
+            origins_grid = np.stack([gm.easting, gm.northing, gm.height], axis=-1)
+        except GsgeoError:
+            origins_grid = None  # e.g. a camera outside the geoid grid; the point is fine
+    else:
+        t84 = transformer(src.id, "EPSG:4979")
+        lon, lat, h84 = (float(v) for v in t84.transform(*point_ecef, errcheck=False))
+
+    return Measurement(
+        point_id=point.id,
+        code=point.code,
+        description=point.description,
+        solution=sol,
+        enu_origin_ecef=frame.origin_ecef,
+        point_ecef=point_ecef,
+        cov_ecef=cov_ecef,
+        grid=grid,
+        ray_origins_ecef=o,
+        ray_directions_ecef=d,
+        ray_origins_grid=origins_grid,
+        excluded=mask,
+        measured_at=_now(),
+        source_crs=src.id,
+        residuals_m=res_m,
+        residuals_px=res_px,
+        outliers=outliers,
+        ifov=ifov,
+        lon=float(lon),
+        lat=float(lat),
+        h_wgs84=float(h84),
+        warnings=warnings,
+    )
+
+
+def measure_session(
+    session: Session,
+    *,
+    crs: str | None = None,
+    vertical: str | None = None,
+    geoid: str | Path | None = None,
+    source_crs: str | None = None,
+    sigma_px: float | None = None,
+) -> list[Measurement | MeasurementFailure]:
+    """Measure every point of a session; overrides fall back to the session's values.
+
+    A point whose rays cannot be intersected becomes a MeasurementFailure; a CRS problem
+    (unknown CRS, missing geoid grid) raises CRSError once for the whole session.
+    """
+    crs = crs if crs is not None else session.crs
+    vertical = vertical if vertical is not None else session.vertical
+    src = source_crs or session.source_crs or "EPSG:4978"
+    s_px = sigma_px if sigma_px is not None else session.sigma_px
+    if s_px is None or not (isinstance(s_px, (int, float)) and math.isfinite(s_px) and s_px > 0):
+        raise InputError(f"sigma_px must be a positive number of pixels, got {s_px!r}")
+    resolve_source(src)
+    if crs:
+        grid_crs(crs, vertical)
+    elif vertical or geoid:
+        raise InputError("a vertical datum (--vertical / --geoid) needs a grid CRS (--crs)")
+    out: list[Measurement | MeasurementFailure] = []
+    for pt in session.points:
+        try:
+            out.append(measure_point(pt, crs=crs, vertical=vertical, geoid=geoid,
+                                     source_crs=src, sigma_px=s_px))
+        except CRSError:
+            raise
+        except GsgeoError as exc:
+            out.append(MeasurementFailure(pt.id, str(exc)))
+    return out

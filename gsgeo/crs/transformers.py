@@ -1,0 +1,129 @@
+"""Cached PROJ transformers and the choice of operation.
+
+A Transformer is built once per (source, target, PROJ data directory) and reused for every
+point (``functools.lru_cache``); gsgeo never builds one per point. Operations are chosen
+explicitly from PROJ's ranked candidates (`TransformerGroup`) so that the operation used is
+known before transforming and recorded with each result.
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import pyproj
+from pyproj import Transformer
+from pyproj.transformer import TransformerGroup
+
+from gsgeo.crs.resolve import disable_network, parse_crs
+
+disable_network()
+
+
+def _datadir() -> str:
+    # Part of every cache key: a grid added to the PROJ data path changes the operations.
+    return pyproj.datadir.get_data_dir()
+
+
+@functools.lru_cache(maxsize=128)
+def _transformer(src: str, dst: str, datadir: str) -> Transformer:
+    return Transformer.from_crs(parse_crs(src), parse_crs(dst), always_xy=True)
+
+
+def transformer(src: str, dst: str) -> Transformer:
+    """A cached, always_xy Transformer between two CRSs given as text (PROJ's own choice)."""
+    return _transformer(src, dst, _datadir())
+
+
+@functools.lru_cache(maxsize=128)
+def _pipeline(definition: str, datadir: str) -> Transformer:
+    return Transformer.from_pipeline(definition)
+
+
+def pipeline(definition: str) -> Transformer:
+    """A cached Transformer from a PROJ pipeline string."""
+    return _pipeline(definition, _datadir())
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """PROJ's ranked operations between two CRSs, split by availability."""
+
+    available: tuple[Transformer, ...]
+    unavailable: tuple  # pyproj Operation objects (their grids are missing)
+
+
+@functools.lru_cache(maxsize=128)
+def _candidates(src: str, dst: str, datadir: str) -> Candidates:
+    with warnings.catch_warnings():
+        # "Best transformation is not available": gsgeo reports this itself, by grid name.
+        warnings.simplefilter("ignore", UserWarning)
+        tg = TransformerGroup(parse_crs(src), parse_crs(dst), always_xy=True)
+    return Candidates(tuple(tg.transformers), tuple(tg.unavailable_operations))
+
+
+def candidates(src: str, dst: str) -> Candidates:
+    """Cached TransformerGroup candidates (best first) between two CRSs given as text."""
+    return _candidates(src, dst, _datadir())
+
+
+def in_area(t: Transformer, lon: float, lat: float) -> bool:
+    """Whether (lon, lat) in degrees lies in the operation's area of use (True if none)."""
+    a = t.area_of_use
+    if a is None:
+        return True
+    w, s, e, n = a.west, a.south, a.east, a.north
+    if not (s <= lat <= n):
+        return False
+    if w <= e:
+        return w <= lon <= e
+    return lon >= w or lon <= e  # crosses the antimeridian
+
+
+def is_ballpark(description: str) -> bool:
+    return "ballpark" in description.lower()
+
+
+def accuracy_m(t: Transformer) -> float | None:
+    """Accuracy of an operation in metres: 0 for a pure conversion, None when unknown."""
+    acc = t.accuracy
+    if acc is None or acc < 0:
+        # PROJ reports -1 both for "unknown" and for conversions; a conversion has no
+        # datum change at all.
+        return 0.0 if _is_conversion(t) else None
+    return float(acc)
+
+
+def _is_conversion(t: Transformer) -> bool:
+    desc = t.description.lower()
+    if is_ballpark(desc):
+        return False
+    try:
+        ops = t.operations or ()
+    except Exception:  # noqa: BLE001 - pyproj raises different types across versions
+        ops = ()
+    if ops:
+        return all(getattr(o, "type_name", "") == "Conversion" for o in ops)
+    return "inverse of" not in desc and " to " not in desc
+
+
+def choose(src: str, dst: str, lon: float, lat: float) -> tuple[Transformer, bool]:
+    """The best available operation whose area of use contains (lon, lat).
+
+    Returns (transformer, inside_area). When no candidate covers the point, the best overall
+    is returned with inside_area False (the caller warns).
+    """
+    c = candidates(src, dst)
+    if not c.available:
+        return transformer(src, dst), False
+    for t in c.available:
+        if in_area(t, lon, lat):
+            return t, True
+    return c.available[0], False
+
+
+def transform_xy(t: Transformer, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    xx, yy = t.transform(x, y, errcheck=False)
+    return np.asarray(xx, dtype=np.float64), np.asarray(yy, dtype=np.float64)
