@@ -1,0 +1,60 @@
+"""`gsgeo serve`: the web viewer, the scenes and the JSON API in one process."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import secrets
+import sys
+from pathlib import Path
+
+from gsgeo.errors import InputError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "serve",
+        help="serve the web viewer, scenes and the JSON API",
+        description="Serve the web viewer at /, scenes from DATA/scenes/<name>/ at "
+                    "/scenes/<name>/, the JSON API under /api (OpenAPI at /docs). Projects "
+                    "are kept in DATA/gsgeo.sqlite.",
+    )
+    p.add_argument("--data", default="data", metavar="DIR",
+                   help="data directory with scenes/ and the project store (default: ./data)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to bind (default 127.0.0.1; any other address requires a "
+                        "token: GSGEO_TOKEN or one generated and printed at start)")
+    p.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free)")
+    p.add_argument("--web", default=None, metavar="DIR",
+                   help="web client directory (default: the repository's web/)")
+    p.add_argument("--log-level", default="warning",
+                   choices=["critical", "error", "warning", "info", "debug"])
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from gsgeo.server.app import ServerConfig, create_app, is_loopback
+
+    if not 0 <= args.port <= 65535:
+        raise InputError(f"--port must be between 0 and 65535, got {args.port}")
+    data = Path(args.data)
+    if data.exists() and not data.is_dir():
+        raise InputError(f"--data {data}: is not a directory")
+    token = os.environ.get("GSGEO_TOKEN") or None
+    if token is None and not is_loopback(args.host):
+        token = secrets.token_urlsafe(24)
+        print(f"gsgeo serve: bound to {args.host}: API token {token}\n"
+              f"  send it as 'Authorization: Bearer {token}' or open "
+              f"http://{args.host}:{args.port}/#token={token}", file=sys.stderr, flush=True)
+    config = ServerConfig(data_dir=data, host=args.host, port=args.port, token=token,
+                          web_dir=Path(args.web) if args.web else None)
+    app = create_app(config)
+    server = uvicorn.Server(uvicorn.Config(app, host=args.host, port=args.port,
+                                           log_level=args.log_level, server_header=False,
+                                           limit_concurrency=1000, timeout_keep_alive=30))
+    print(f"gsgeo serve: data {data.resolve()}; http://{args.host}:{args.port}/ "
+          "(API docs at /docs)", file=sys.stderr, flush=True)
+    server.run()
+    return 0

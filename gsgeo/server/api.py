@@ -1,0 +1,302 @@
+"""The JSON API under /api (see DESIGN.md "HTTP"); shapes are documented at /docs.
+
+Endpoints are plain (sync) functions: FastAPI runs them in its thread pool, and each store
+call is one SQLite transaction.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
+from fastapi.responses import FileResponse
+from starlette.background import BackgroundTask
+
+from gsgeo import __version__
+from gsgeo.errors import InputError
+from gsgeo.server import models as m
+from gsgeo.server.scenes import list_scenes
+from gsgeo.store import FeatureRecord, PointRecord, Project, Projects
+from gsgeo.store.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
+from gsgeo.store.solving import check_excluded, json_ready, measure, session_point
+
+router = APIRouter(prefix="/api")
+
+PID = Annotated[str, m.Field(description="project id", max_length=64)]
+ITEM = Annotated[str, m.Field(description="point, line, polygon or check point id",
+                              max_length=100)]
+EXPORT_TYPES = {"gpkg": "application/geopackage+sqlite3", "geojson": "application/geo+json",
+                "csv": "text/csv; charset=utf-8"}
+
+
+def svc(request: Request) -> Projects:
+    return request.app.state.projects
+
+
+def project_json(p: Project) -> dict[str, Any]:
+    return {"id": p.id, "name": p.name, "description": p.description, "scene": p.scene,
+            "crs": p.crs, "vertical": p.vertical, "geoid": p.geoid, "source_crs": p.source_crs,
+            "sigma_px": p.sigma_px, "settings_rev": p.settings_rev,
+            "created_at": p.created_at, "updated_at": p.updated_at}
+
+
+def point_json(pt: PointRecord) -> dict[str, Any]:
+    return {"id": pt.id, "code": pt.code, "description": pt.description, "rays": pt.rays,
+            "excluded": pt.excluded, "status": "solved" if pt.result is not None else "failed",
+            "error": pt.error, "record": pt.record, "result": pt.result,
+            "created_at": pt.created_at, "updated_at": pt.updated_at}
+
+
+def feature_json(f: FeatureRecord, measures: dict[str, Any] | None = None) -> dict[str, Any]:
+    return {"id": f.id, "kind": f.kind, "points": f.point_ids, "code": f.code,
+            "description": f.description, "measures": measures,
+            "created_at": f.created_at, "updated_at": f.updated_at}
+
+
+# info, intersect, crs, scenes --------------------------------------------------------------
+@router.get("/info", summary="Server version, limits and whether a token is required")
+def info(request: Request) -> dict[str, Any]:
+    cfg = request.app.state.config
+    return {"version": __version__, "token_required": cfg.token is not None,
+            "max_body_bytes": cfg.max_body, "max_upload_bytes": cfg.max_upload,
+            "cesium_url": "/cesium/", "scenes_url": "/scenes/"}
+
+
+@router.post("/intersect", summary="Intersect one point's rays (stateless)")
+def intersect(body: m.IntersectRequest, request: Request) -> dict[str, Any]:
+    """One point's rays (session-JSON shape) and solving options -> the solved point:
+    grid coordinates and covariance (when ``crs`` is given), WGS 84 position, sigma0,
+    residuals per ray, outlier flags and warnings (gsgeo.crs.pipeline ``to_dict``)."""
+    rays = [r.model_dump(exclude_none=True) for r in body.rays]
+    sp = session_point(body.id, rays, body.code, body.description)
+    excluded = check_excluded(body.exclude, len(rays), "exclude")
+    settings = body.model_dump(include={"crs", "vertical", "geoid", "source_crs", "sigma_px"})
+    return json_ready(measure(sp, settings, excluded, request.app.state.config.data_dir).to_dict())
+
+
+@router.get("/crs", summary="Search coordinate reference systems by name or code")
+def crs_search(q: Annotated[str, Query(min_length=1, max_length=200)],
+               limit: Annotated[int, Query(ge=1, le=200)] = 20) -> dict[str, Any]:
+    from gsgeo.crs import search as crs_search_module
+
+    hits = crs_search_module.search_crs(q, limit=limit)
+    return {"query": q, "results": json_ready([h if isinstance(h, dict) else vars(h)
+                                               for h in hits])}
+
+
+@router.get("/scenes", summary="Scenes in DATA/scenes with their georeference")
+def scenes(request: Request) -> dict[str, Any]:
+    return {"scenes": list_scenes(request.app.state.config.data_dir)}
+
+
+# projects --------------------------------------------------------------------------------
+@router.get("/projects", summary="List projects")
+def list_projects(request: Request) -> dict[str, Any]:
+    return {"projects": [project_json(p) for p in svc(request).list_projects()]}
+
+
+@router.post("/projects", status_code=201, summary="Create a project")
+def create_project(body: m.ProjectCreate, request: Request) -> dict[str, Any]:
+    p = svc(request).create_project(**body.model_dump())
+    return project_json(p)
+
+
+@router.get("/projects/{pid}", summary="One project with its counts")
+def get_project(pid: PID, request: Request) -> dict[str, Any]:
+    s = svc(request).project_summary(pid)
+    p = s.pop("project")
+    return project_json(p) | {"counts": s}
+
+
+@router.patch("/projects/{pid}", summary="Change a project; new solving settings re-solve all points")
+def patch_project(pid: PID, body: m.ProjectPatch, request: Request) -> dict[str, Any]:
+    changes = body.model_dump(exclude_unset=True)
+    for key in ("name", "source_crs", "sigma_px"):
+        if key in changes and changes[key] is None:
+            raise InputError(f"{key}: must not be null")
+    return project_json(svc(request).update_project(pid, changes))
+
+
+@router.delete("/projects/{pid}", status_code=204, summary="Delete a project and all it holds")
+def delete_project(pid: PID, request: Request) -> Response:
+    svc(request).delete_project(pid)
+    return Response(status_code=204)
+
+
+@router.get("/projects/{pid}/session", summary="The project as a session JSON document")
+def get_session(pid: PID, request: Request) -> dict[str, Any]:
+    s = svc(request)
+    p = s.get_project(pid)
+    return {"source_crs": p.source_crs, "crs": p.crs, "vertical": p.vertical,
+            "sigma_px": p.sigma_px,
+            "points": [{"id": q.id, "code": q.code, "description": q.description, "rays": q.rays}
+                       for q in s.list_points(pid)],
+            "lines": [{"id": f.id, "points": f.point_ids} for f, _ in s.list_features(pid, "line")],
+            "polygons": [{"id": f.id, "points": f.point_ids}
+                         for f, _ in s.list_features(pid, "polygon")]}
+
+
+# points ----------------------------------------------------------------------------------
+@router.get("/projects/{pid}/points", summary="List points with their solved results")
+def list_points(pid: PID, request: Request) -> dict[str, Any]:
+    return {"points": [point_json(q) for q in svc(request).list_points(pid)]}
+
+
+@router.post("/projects/{pid}/points", status_code=201, summary="Solve and store a point")
+def create_point(pid: PID, body: m.PointCreate, request: Request) -> dict[str, Any]:
+    doc = body.model_dump()
+    doc["rays"] = [r.model_dump(exclude_none=True) for r in body.rays]
+    return point_json(svc(request).add_point(pid, doc))
+
+
+@router.get("/projects/{pid}/points/{point_id}", summary="One point")
+def get_point(pid: PID, point_id: ITEM, request: Request) -> dict[str, Any]:
+    return point_json(svc(request).get_point(pid, point_id))
+
+
+@router.patch("/projects/{pid}/points/{point_id}",
+              summary="Rename, recode, exclude or restore a ray, or replace rays (re-solves)")
+def patch_point(pid: PID, point_id: ITEM, body: m.PointPatch, request: Request) -> dict[str, Any]:
+    changes = {k: v for k, v in body.model_dump(exclude_unset=True).items() if v is not None}
+    if body.rays is not None:
+        changes["rays"] = [r.model_dump(exclude_none=True) for r in body.rays]
+    return point_json(svc(request).update_point(pid, point_id, changes))
+
+
+@router.delete("/projects/{pid}/points/{point_id}", status_code=204, summary="Delete a point")
+def delete_point(pid: PID, point_id: ITEM, request: Request) -> Response:
+    svc(request).delete_point(pid, point_id)
+    return Response(status_code=204)
+
+
+# lines and polygons ------------------------------------------------------------------------
+def _feature_routes(kind: str, plural: str) -> None:
+    def list_(pid: PID, request: Request) -> dict[str, Any]:
+        return {plural: [feature_json(f, ms) for f, ms in svc(request).list_features(pid, kind)]}
+
+    def create(pid: PID, body: m.FeatureCreate, request: Request) -> dict[str, Any]:
+        s = svc(request)
+        f = s.add_feature(pid, kind, body.model_dump())
+        return feature_json(*s.get_feature(pid, kind, f.id))
+
+    def get(pid: PID, fid: ITEM, request: Request) -> dict[str, Any]:
+        return feature_json(*svc(request).get_feature(pid, kind, fid))
+
+    def patch(pid: PID, fid: ITEM, body: m.FeaturePatch, request: Request) -> dict[str, Any]:
+        s = svc(request)
+        changes = {k: v for k, v in body.model_dump(exclude_unset=True).items() if v is not None}
+        f = s.update_feature(pid, kind, fid, changes)
+        return feature_json(*s.get_feature(pid, kind, f.id))
+
+    def delete(pid: PID, fid: ITEM, request: Request) -> Response:
+        svc(request).delete_feature(pid, kind, fid)
+        return Response(status_code=204)
+
+    what = "lengths" if kind == "line" else "area and perimeter"
+    base = f"/projects/{{pid}}/{plural}"
+    router.add_api_route(base, list_, methods=["GET"], summary=f"List {plural} with {what}",
+                         operation_id=f"list_{plural}")
+    router.add_api_route(base, create, methods=["POST"], status_code=201,
+                         summary=f"Create a {kind} from point ids", operation_id=f"create_{kind}")
+    router.add_api_route(base + "/{fid}", get, methods=["GET"], summary=f"One {kind}",
+                         operation_id=f"get_{kind}")
+    router.add_api_route(base + "/{fid}", patch, methods=["PATCH"],
+                         summary=f"Change a {kind}", operation_id=f"patch_{kind}")
+    router.add_api_route(base + "/{fid}", delete, methods=["DELETE"], status_code=204,
+                         summary=f"Delete a {kind}", operation_id=f"delete_{kind}")
+
+
+_feature_routes("line", "lines")
+_feature_routes("polygon", "polygons")
+
+
+# check points ------------------------------------------------------------------------------
+def check_point_json(c) -> dict[str, Any]:
+    return {"id": c.id, "x": c.x, "y": c.y, "z": c.z, "crs": c.crs, "role": c.role,
+            "source": c.source, "created_at": c.created_at}
+
+
+@router.get("/projects/{pid}/checkpoints", summary="List check points (as given, in their CRS)")
+def list_check_points(pid: PID, request: Request) -> dict[str, Any]:
+    return {"check_points": [check_point_json(c) for c in svc(request).list_check_points(pid)]}
+
+
+@router.post("/projects/{pid}/checkpoints", status_code=201,
+             summary="Add check points given as JSON in a stated CRS")
+def add_check_points(pid: PID, body: m.CheckPointsCreate, request: Request) -> dict[str, Any]:
+    rows = [CheckPointRow(c.id, c.x, c.y, c.z) for c in body.points]
+    ids = [r.id for r in rows]
+    if len(set(ids)) != len(ids):
+        dup = next(i for i in ids if ids.count(i) > 1)
+        raise InputError(f"points: duplicate id '{dup}'")
+    n = svc(request).add_check_points(pid, rows, body.crs, role=body.role, replace=body.replace)
+    return {"imported": n}
+
+
+@router.post("/projects/{pid}/checkpoints/import", status_code=201,
+             summary="Import check points from a CSV, GeoJSON or GeoPackage file")
+def import_check_points(
+    pid: PID, request: Request,
+    file: Annotated[UploadFile, File(description="CSV, GeoJSON or GeoPackage")],
+    crs: Annotated[str | None, Form(max_length=20000, description=(
+        "CRS of the coordinates; GeoPackage: defaults to the layer's CRS, GeoJSON: EPSG:4979"))] = None,
+    format: Annotated[Literal["csv", "geojson", "gpkg"] | None, Form(
+        description="file format; from the file name when absent")] = None,
+    role: Annotated[Literal["check", "control"], Form()] = "check",
+    replace: Annotated[bool, Form()] = False,
+) -> dict[str, Any]:
+    fmt = format or format_from_name(file.filename)
+    if fmt is None:
+        raise InputError(f"format: cannot tell the format of '{file.filename}'; give format="
+                         f"{'|'.join(FORMATS)}")
+    data = file.file.read()
+    rows, file_crs = read_check_points(data, fmt)
+    crs = (crs or "").strip() or file_crs or ("EPSG:4979" if fmt == "geojson" else None)
+    if crs is None:
+        raise InputError("crs: state the CRS the file's coordinates are in, e.g. EPSG:27700")
+    n = svc(request).add_check_points(pid, rows, crs, role=role, replace=replace,
+                                      source=(file.filename or "")[:300])
+    return {"imported": n, "crs": crs, "format": fmt}
+
+
+@router.delete("/projects/{pid}/checkpoints", summary="Delete all check points of a project")
+def delete_check_points(pid: PID, request: Request) -> dict[str, Any]:
+    return {"deleted": svc(request).delete_all_check_points(pid)}
+
+
+@router.delete("/projects/{pid}/checkpoints/{cid}", status_code=204,
+               summary="Delete one check point")
+def delete_check_point(pid: PID, cid: ITEM, request: Request) -> Response:
+    svc(request).delete_check_point(pid, cid)
+    return Response(status_code=204)
+
+
+@router.get("/projects/{pid}/accuracy",
+            summary="Measured points against check points: dE dN dH, RMSE, ME, SD, counts")
+def accuracy(pid: PID, request: Request,
+             role: Annotated[Literal["check", "control"], Query()] = "check") -> dict[str, Any]:
+    return svc(request).accuracy(pid, role)
+
+
+# export ----------------------------------------------------------------------------------------
+@router.get("/projects/{pid}/export", summary="Download points, lines and polygons",
+            response_class=FileResponse,
+            responses={200: {"content": {t: {} for t in EXPORT_TYPES.values()}}})
+def export(pid: PID, request: Request,
+           format: Annotated[Literal["gpkg", "geojson", "csv"], Query()] = "gpkg",
+           crs: Annotated[str | None, Query(max_length=20000,
+                                            description="grid CRS; the project's when absent")] = None,
+           ) -> FileResponse:
+    from gsgeo.server.exporting import export_project
+
+    tmpdir = Path(tempfile.mkdtemp(prefix="gsgeo-export-"))
+    try:
+        path = export_project(svc(request), pid, tmpdir, format, crs)
+    except BaseException:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+        raise
+    return FileResponse(path, media_type=EXPORT_TYPES[format], filename=path.name,
+                        background=BackgroundTask(shutil.rmtree, tmpdir, ignore_errors=True))

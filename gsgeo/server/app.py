@@ -1,0 +1,200 @@
+"""The FastAPI application: web client at /, Cesium at /cesium/, scenes at /scenes/, API at /api.
+
+``create_app(ServerConfig(data_dir=...))`` builds it; ``gsgeo serve`` runs it with uvicorn.
+"""
+
+from __future__ import annotations
+
+import logging
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from gsgeo import __version__
+from gsgeo.errors import GsgeoError
+from gsgeo.server.files import file_response
+from gsgeo.server.guard import BodyTooLarge, Guard, MiB
+from gsgeo.store import ConflictError, NotFoundError, Projects, StoreError, open_store
+
+log = logging.getLogger("gsgeo.server")
+
+REPO_WEB = Path(__file__).resolve().parents[2] / "web"
+LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "[::1]", "::1"}
+
+
+@dataclass
+class ServerConfig:
+    """How the server runs. ``token`` None: no token (only sensible on loopback)."""
+
+    data_dir: Path
+    host: str = "127.0.0.1"
+    port: int = 8000
+    token: str | None = None
+    web_dir: Path | None = None  # default: the repository's web/ (its dist/ when built)
+    cesium_dir: Path | None = None  # default: web/node_modules/cesium/Build/Cesium
+    max_body: int = 4 * MiB
+    max_upload: int = 64 * MiB
+    allowed_hosts: set[str] | None = field(default=None)  # None: derived from host
+
+    def __post_init__(self) -> None:
+        self.data_dir = Path(self.data_dir)
+        if self.web_dir is None:
+            self.web_dir = REPO_WEB / "dist" if (REPO_WEB / "dist" / "index.html").is_file() \
+                else REPO_WEB
+        if self.cesium_dir is None:
+            self.cesium_dir = REPO_WEB / "node_modules" / "cesium" / "Build" / "Cesium"
+            if not self.cesium_dir.is_dir() and (Path(self.web_dir) / "cesium").is_dir():
+                self.cesium_dir = Path(self.web_dir) / "cesium"
+        if self.allowed_hosts is None and is_loopback(self.host):
+            self.allowed_hosts = LOOPBACK_HOSTS | {self.host.lower()}
+
+
+def is_loopback(host: str) -> bool:
+    return host in ("127.0.0.1", "localhost", "::1") or host.startswith("127.")
+
+
+def _field_of(message: str) -> str | None:
+    head = message.split(":", 1)[0]
+    return head if ":" in message and " " not in head.strip() and head else None
+
+
+def _loc(loc: tuple | list) -> str:
+    parts = [p for p in loc if p not in ("body", "query", "path", "form", "header")] or list(loc)
+    out = ""
+    for p in parts:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out
+
+
+def _error(status: int, message: str, field: str | None = None, detail: Any = None) -> JSONResponse:
+    return JSONResponse({"detail": message if detail is None else detail, "message": message,
+                         "field": field}, status_code=status)
+
+
+def _install_error_handlers(app: FastAPI) -> None:
+    @app.exception_handler(RequestValidationError)
+    async def validation(_req: Request, exc: RequestValidationError) -> JSONResponse:
+        errs = exc.errors()
+        msgs = []
+        for e in errs[:5]:
+            where = _loc(e.get("loc", ()))
+            msgs.append(f"{where}: {e.get('msg', 'invalid')}" if where else e.get("msg", "invalid"))
+        first = _loc(errs[0].get("loc", ())) if errs else None
+        detail = [{"loc": list(e.get("loc", ())), "msg": str(e.get("msg", "")),
+                   "type": str(e.get("type", ""))} for e in errs]
+        return _error(422, "; ".join(msgs) or "invalid request", first or None, detail)
+
+    @app.exception_handler(NotFoundError)
+    async def not_found(_req: Request, exc: NotFoundError) -> JSONResponse:
+        return _error(404, str(exc))
+
+    @app.exception_handler(ConflictError)
+    async def conflict(_req: Request, exc: ConflictError) -> JSONResponse:
+        return _error(409, str(exc), _field_of(str(exc)))
+
+    @app.exception_handler(StoreError)
+    async def store_error(_req: Request, exc: StoreError) -> JSONResponse:
+        log.error("store error: %s", exc)
+        return _error(503, f"the project store is unavailable: {exc}")
+
+    @app.exception_handler(GsgeoError)
+    async def gsgeo_error(_req: Request, exc: GsgeoError) -> JSONResponse:
+        msg = str(exc)
+        return _error(422, msg, _field_of(msg))
+
+    @app.exception_handler(BodyTooLarge)
+    async def too_large(_req: Request, exc: BodyTooLarge) -> JSONResponse:
+        return _error(413, str(exc), "body")
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(_req: Request, exc: StarletteHTTPException) -> Response:
+        if isinstance(exc.__cause__, BodyTooLarge):
+            return _error(413, str(exc.__cause__), "body")
+        msg = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
+        if exc.status_code == 400 and "parsing the body" in msg:
+            msg = "body: cannot be parsed (malformed JSON or form data)"
+        resp = _error(exc.status_code, msg, "body" if msg.startswith("body") else None)
+        for k, v in (exc.headers or {}).items():
+            resp.headers[k] = v
+        return resp
+
+    @app.exception_handler(Exception)
+    async def unexpected(_req: Request, exc: Exception) -> JSONResponse:
+        log.exception("unexpected error")
+        return _error(500, f"internal error ({type(exc).__name__}); the server log has details")
+
+
+WEB_CACHE = "no-cache"
+CESIUM_CACHE = "public, max-age=86400"
+SCENE_CACHE = "no-cache"  # tiles revalidate by ETag: a regenerated scene is never stale
+
+PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>gsgeo</title></head>
+<body><h1>gsgeo {version}</h1><p>The web client is not built (web/index.html is missing).
+The API is at <a href="/docs">/docs</a>; scenes are listed at
+<a href="/api/scenes">/api/scenes</a>.</p></body></html>"""
+
+
+def create_app(config: ServerConfig, store=None) -> FastAPI:
+    """The application; ``store`` defaults to the SQLite store of ``config.data_dir``."""
+    store = store or open_store(config.data_dir)
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI):
+        yield
+        store.close()
+
+    app = FastAPI(title="gsgeo", version=__version__, lifespan=lifespan,
+                  description="Survey-grade point measurement in georeferenced 3D Gaussian "
+                              "Splatting scenes. Rays in, grid coordinates with covariance out.")
+    app.state.config = config
+    app.state.store = store
+    app.state.projects = Projects(store, config.data_dir)
+    _install_error_handlers(app)
+
+    from gsgeo.server.api import router
+
+    app.include_router(router)
+
+    @app.api_route("/scenes/{name}/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
+    def scene_file(name: str, rel: str, request: Request) -> Response:
+        return file_response(request, config.data_dir / "scenes" / name, rel, SCENE_CACHE) \
+            if _safe_name(name) else _error(404, "no such scene")
+
+    @app.api_route("/cesium/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
+    def cesium_file(rel: str, request: Request) -> Response:
+        return file_response(request, Path(config.cesium_dir), rel, CESIUM_CACHE)
+
+    @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
+    def index(request: Request) -> Response:
+        if (Path(config.web_dir) / "index.html").is_file():
+            return file_response(request, Path(config.web_dir), "index.html", WEB_CACHE)
+        return HTMLResponse(PLACEHOLDER.format(version=__version__))
+
+    @app.api_route("/api", methods=["GET"], include_in_schema=False)
+    def api_root() -> Response:
+        return RedirectResponse("/docs")
+
+    @app.api_route("/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
+    def web_file(rel: str, request: Request) -> Response:
+        if rel.startswith(("api/", "node_modules/")) or rel.split("/", 1)[0].startswith("."):
+            return _error(404, f"not found: /{rel}")
+        return file_response(request, Path(config.web_dir), rel, WEB_CACHE)
+
+    app.add_middleware(Guard, token=config.token, allowed_hosts=config.allowed_hosts,
+                       max_body=config.max_body, max_upload=config.max_upload)
+    return app
+
+
+def _safe_name(name: str) -> bool:
+    from gsgeo.store.validate import SLUG
+
+    return bool(SLUG.match(name))
+
+
+__all__ = ["ServerConfig", "create_app"]

@@ -1,0 +1,140 @@
+"""Request bodies of the JSON API (pydantic), in the session-JSON shapes of DESIGN.md.
+
+They check types and sizes so a malformed request gets 422 naming the field; the deeper
+checks (zero direction, affine model matrix, enough rays, CRS) happen in gsgeo.session,
+gsgeo.store and gsgeo.crs and name the field as well.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+Vec2 = Annotated[list[Finite], Field(min_length=2, max_length=2)]
+Mat16 = Annotated[list[Finite], Field(min_length=16, max_length=16)]
+Text = Annotated[str, Field(max_length=2000)]
+Code = Annotated[str, Field(max_length=200)]
+ItemId = Annotated[str, Field(min_length=1, max_length=100, pattern=r"^[^/\\\x00-\x1f\x7f]+$")]
+Slug = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")]
+CrsText = Annotated[str, Field(min_length=1, max_length=20000)]
+RayIndex = Annotated[int, Field(ge=0, le=999)]
+SigmaPx = Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]
+
+
+class Ray(BaseModel):
+    """One aim, in rendered ECEF (metres); DESIGN.md "Session JSON"."""
+
+    model_config = ConfigDict(extra="ignore")
+    origin: Vec3 = Field(description="camera centre, rendered ECEF, metres")
+    direction: Vec3 = Field(description="ray direction, rendered ECEF, any non-zero length")
+    ifov: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] | None = Field(
+        None, description="angular size of a pixel, radians")
+    pixel: Vec2 | None = Field(None, description="clicked pixel (CSS px)")
+    viewport: Vec2 | None = Field(None, description="canvas size (CSS px)")
+    model_matrix: Mat16 | None = Field(
+        None, description="tileset modelMatrix at the click, 16 numbers, column-major")
+
+
+Rays = Annotated[list[Ray], Field(min_length=2, max_length=1000)]
+
+
+class SolveSettings(BaseModel):
+    crs: CrsText | None = Field(None, description="output grid CRS, e.g. EPSG:27700")
+    vertical: CrsText | None = Field(None, description="vertical CRS, e.g. EPSG:5701")
+    geoid: Annotated[str, Field(max_length=200)] | None = Field(
+        None, description="geoid GeoTIFF file name in DATA/geoids/")
+    source_crs: CrsText = Field("EPSG:4978", description="geocentric CRS of the scene")
+    sigma_px: SigmaPx = Field(1.0, description="a-priori aiming precision, pixels")
+
+
+class IntersectRequest(SolveSettings):
+    model_config = ConfigDict(extra="forbid")
+    rays: Rays
+    exclude: Annotated[list[RayIndex], Field(max_length=1000)] = Field(
+        default_factory=list, description="0-based ray indices left out of the solution")
+    id: ItemId = "P"
+    code: Code = ""
+    description: Text = ""
+
+
+class ProjectCreate(SolveSettings):
+    model_config = ConfigDict(extra="forbid")
+    name: Annotated[str, Field(min_length=1, max_length=200)]
+    id: Slug | None = Field(None, description="URL-safe id; generated from the name when absent")
+    description: Text = ""
+    scene: Slug | None = Field(None, description="scene name in DATA/scenes/")
+
+
+class ProjectPatch(BaseModel):
+    """Any subset; changing crs, vertical, geoid, source_crs or sigma_px re-solves every point."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: Annotated[str, Field(min_length=1, max_length=200)] | None = None
+    description: Text | None = None
+    scene: Slug | None = None
+    crs: CrsText | None = None
+    vertical: CrsText | None = None
+    geoid: Annotated[str, Field(max_length=200)] | None = None
+    source_crs: CrsText | None = None
+    sigma_px: SigmaPx | None = None
+
+
+class PointCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    id: ItemId | None = Field(None, description="point id; next free 'P<n>' when absent")
+    code: Code = ""
+    description: Text = ""
+    rays: Rays
+    excluded: Annotated[list[RayIndex], Field(max_length=1000)] = Field(default_factory=list)
+
+
+class PointPatch(BaseModel):
+    """Rename (id), recode (code, description), exclude/restore rays, or replace the rays."""
+
+    model_config = ConfigDict(extra="forbid")
+    id: ItemId | None = None
+    code: Code | None = None
+    description: Text | None = None
+    excluded: Annotated[list[RayIndex], Field(max_length=1000)] | None = Field(
+        None, description="the full set of excluded ray indices")
+    exclude_ray: RayIndex | None = Field(None, description="exclude one more ray (0-based)")
+    restore_ray: RayIndex | None = Field(None, description="bring an excluded ray back")
+    rays: Rays | None = Field(None, description="replace all rays (clears exclusions)")
+
+
+PointIds = Annotated[list[ItemId], Field(min_length=2, max_length=10000)]
+
+
+class FeatureCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    id: ItemId | None = None
+    points: PointIds = Field(description="point ids in order")
+    code: Code = ""
+    description: Text = ""
+
+
+class FeaturePatch(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    id: ItemId | None = None
+    points: PointIds | None = None
+    code: Code | None = None
+    description: Text | None = None
+
+
+class CheckPointIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    id: ItemId
+    x: Finite = Field(description="easting (or longitude)")
+    y: Finite = Field(description="northing (or latitude)")
+    z: Finite | None = Field(None, description="height; omitted when unknown")
+
+
+class CheckPointsCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    crs: CrsText = Field(description="CRS the coordinates are given in, e.g. EPSG:27700")
+    role: Literal["check", "control"] = "check"
+    replace: bool = Field(False, description="drop the project's existing check points first")
+    points: Annotated[list[CheckPointIn], Field(min_length=1, max_length=100000)]

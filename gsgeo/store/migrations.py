@@ -1,0 +1,72 @@
+"""SQLite schema, as numbered migrations (the schema version is ``PRAGMA user_version``).
+
+Append a migration to change the schema; never edit one that has shipped. Each migration
+runs in its own transaction together with the bump of ``user_version``.
+"""
+
+from __future__ import annotations
+
+MIGRATIONS: list[str] = [
+    # 1: projects, points (rays as session-JSON, results as JSON), lines/polygons, check points
+    """
+    CREATE TABLE projects (
+        id TEXT PRIMARY KEY,
+        name TEXT NOT NULL,
+        description TEXT NOT NULL DEFAULT '',
+        scene TEXT,
+        crs TEXT,
+        vertical TEXT,
+        geoid TEXT,
+        source_crs TEXT NOT NULL DEFAULT 'EPSG:4978',
+        sigma_px REAL NOT NULL DEFAULT 1.0 CHECK (sigma_px > 0),
+        settings_rev INTEGER NOT NULL DEFAULT 0,
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL
+    );
+    CREATE TABLE points (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        id TEXT NOT NULL,
+        seq INTEGER NOT NULL,
+        code TEXT NOT NULL DEFAULT '',
+        description TEXT NOT NULL DEFAULT '',
+        rays TEXT NOT NULL CHECK (json_valid(rays) AND json_array_length(rays) >= 2),
+        excluded TEXT NOT NULL DEFAULT '[]' CHECK (json_valid(excluded)),
+        result TEXT CHECK (result IS NULL OR json_valid(result)),
+        record TEXT CHECK (record IS NULL OR json_valid(record)),
+        error TEXT,
+        solved_rev INTEGER NOT NULL DEFAULT -1,
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        PRIMARY KEY (project_id, id),
+        CHECK ((result IS NULL) = (record IS NULL)),
+        CHECK (result IS NOT NULL OR error IS NOT NULL)
+    );
+    CREATE INDEX points_seq ON points(project_id, seq);
+    CREATE TABLE features (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        kind TEXT NOT NULL CHECK (kind IN ('line', 'polygon')),
+        id TEXT NOT NULL,
+        seq INTEGER NOT NULL,
+        point_ids TEXT NOT NULL CHECK (json_valid(point_ids)),
+        code TEXT NOT NULL DEFAULT '',
+        description TEXT NOT NULL DEFAULT '',
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        PRIMARY KEY (project_id, kind, id)
+    );
+    CREATE TABLE check_points (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        id TEXT NOT NULL,
+        x REAL NOT NULL,
+        y REAL NOT NULL,
+        z REAL,
+        crs TEXT NOT NULL,
+        role TEXT NOT NULL DEFAULT 'check' CHECK (role IN ('check', 'control')),
+        source TEXT NOT NULL DEFAULT '',
+        created_at TEXT NOT NULL,
+        PRIMARY KEY (project_id, id)
+    );
+    """,
+]
+
+SCHEMA_VERSION = len(MIGRATIONS)

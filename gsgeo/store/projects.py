@@ -1,0 +1,547 @@
+"""Projects as the API sees them: validation, solving and recomputation on top of a Store.
+
+Every public method is one transaction. Solving happens inside the write transaction, so a
+point is never stored with a result from other settings than the ones stored with its
+project, and two clients changing the same point cannot lose each other's change.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import secrets
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.store.accuracy import accuracy_report
+from gsgeo.store.base import Store, Transaction
+from gsgeo.store.checkpoints import CheckPointRow
+from gsgeo.store.records import (
+    CheckPointRecord,
+    ConflictError,
+    FeatureRecord,
+    NotFoundError,
+    PointRecord,
+    Project,
+)
+from gsgeo.store.solving import (
+    check_excluded,
+    json_ready,
+    measure,
+    resolve_geoid,
+    session_point,
+    solved_fields,
+)
+from gsgeo.store.validate import item_id, positive, slug
+
+SETTINGS = ("crs", "vertical", "geoid", "source_crs", "sigma_px")
+KINDS = {"line": 2, "polygon": 3}  # kind -> minimum number of points
+MAX_RAYS = 1000
+MAX_FEATURE_POINTS = 10_000
+
+
+def _text(value: Any, where: str, max_len: int = 2000) -> str:
+    if value is None:
+        return ""
+    if not isinstance(value, str):
+        raise InputError(f"{where}: expected text")
+    if len(value) > max_len:
+        raise InputError(f"{where}: longer than {max_len} characters")
+    return value
+
+
+def validate_settings(settings: dict[str, Any], data_dir: Path | None) -> dict[str, Any]:
+    """Check crs / vertical / geoid / source_crs / sigma_px through gsgeo.crs; CRSError names the field."""
+    from gsgeo.crs.resolve import grid_crs, source_crs
+
+    out = dict(settings)
+    for key in ("crs", "vertical", "geoid"):
+        v = out.get(key)
+        if v is not None and (not isinstance(v, str) or not v.strip()):
+            raise InputError(f"{key}: expected text or null")
+        out[key] = v.strip() if isinstance(v, str) else None
+    src = out.get("source_crs") or "EPSG:4978"
+    if not isinstance(src, str):
+        raise InputError("source_crs: expected text such as EPSG:4978")
+    out["source_crs"] = src.strip()
+    out["sigma_px"] = positive(out.get("sigma_px", 1.0), "sigma_px")
+    try:
+        source_crs(out["source_crs"])
+    except CRSError as exc:
+        raise CRSError(f"source_crs: {exc}") from None
+    if out["crs"] is None and (out["vertical"] or out["geoid"]):
+        raise CRSError("vertical: a vertical datum or geoid needs a grid crs as well")
+    if out["vertical"] and out["geoid"]:
+        raise CRSError("geoid: give either a vertical CRS or a geoid grid, not both")
+    if out["crs"] is not None:
+        try:
+            grid_crs(out["crs"], out["vertical"])
+        except CRSError as exc:
+            field = "vertical" if out["vertical"] and "vertical" in str(exc).lower() else "crs"
+            raise CRSError(f"{field}: {exc}") from None
+    resolve_geoid(out["geoid"], data_dir)
+    return out
+
+
+class Projects:
+    """The project service over a :class:`~gsgeo.store.base.Store`.
+
+    ``data_dir`` is where geoid grids (DATA/geoids/) and scenes (DATA/scenes/) live.
+    """
+
+    def __init__(self, store: Store, data_dir: str | Path | None = None):
+        self.store = store
+        self.data_dir = Path(data_dir) if data_dir is not None else None
+
+    # projects -------------------------------------------------------------------------
+    @staticmethod
+    def _project(tx: Transaction, pid: str) -> Project:
+        p = tx.get_project(pid)
+        if p is None:
+            raise NotFoundError(f"project '{pid}' does not exist")
+        return p
+
+    def list_projects(self) -> list[Project]:
+        with self.store.transaction(write=False) as tx:
+            return tx.list_projects()
+
+    def get_project(self, pid: str) -> Project:
+        with self.store.transaction(write=False) as tx:
+            return self._project(tx, pid)
+
+    def project_summary(self, pid: str) -> dict[str, Any]:
+        with self.store.transaction(write=False) as tx:
+            p = self._project(tx, pid)
+            pts = tx.list_points(pid)
+            return {"n_points": len(pts),
+                    "n_failed": sum(1 for q in pts if q.result is None),
+                    "n_lines": len(tx.list_features(pid, "line")),
+                    "n_polygons": len(tx.list_features(pid, "polygon")),
+                    "n_check_points": len(tx.list_check_points(pid)),
+                    "project": p}
+
+    def create_project(self, *, name: str, id: str | None = None, description: str = "",
+                       scene: str | None = None, **settings: Any) -> Project:
+        name = _text(name, "name", 200).strip()
+        if not name:
+            raise InputError("name: must not be empty")
+        if id is None:
+            base = re.sub(r"[^A-Za-z0-9_.-]+", "-", name).strip("-.")[:40] or "project"
+            if not base[0].isalnum():
+                base = "p" + base
+            id = f"{base}-{secrets.token_hex(3)}"
+        pid = slug(id, "id")
+        if scene is not None:
+            scene = self._check_scene(scene)
+        s = validate_settings({k: settings.get(k) for k in SETTINGS if k in settings} |
+                              {"sigma_px": settings.get("sigma_px", 1.0)}, self.data_dir)
+        p = Project(id=pid, name=name, description=_text(description, "description"),
+                    scene=scene, crs=s["crs"], vertical=s["vertical"], geoid=s["geoid"],
+                    source_crs=s["source_crs"], sigma_px=s["sigma_px"])
+        with self.store.transaction() as tx:
+            tx.insert_project(p)
+        return p
+
+    def _check_scene(self, scene: str) -> str:
+        scene = slug(scene, "scene")
+        if self.data_dir is not None:
+            if not (self.data_dir / "scenes" / scene / "tileset.json").is_file():
+                raise InputError(f"scene: no scene '{scene}' in {self.data_dir / 'scenes'}")
+        return scene
+
+    def update_project(self, pid: str, changes: dict[str, Any]) -> Project:
+        """Change name/description/scene and solving settings; a settings change re-solves
+        every point from its rays in the same transaction."""
+        unknown = set(changes) - {"name", "description", "scene", *SETTINGS}
+        if unknown:
+            raise InputError(f"{sorted(unknown)[0]}: not a project field")
+        with self.store.transaction() as tx:
+            p = self._project(tx, pid)
+            if "name" in changes:
+                name = _text(changes["name"], "name", 200).strip()
+                if not name:
+                    raise InputError("name: must not be empty")
+                p.name = name
+            if "description" in changes:
+                p.description = _text(changes["description"], "description")
+            if "scene" in changes:
+                p.scene = None if changes["scene"] is None else self._check_scene(changes["scene"])
+            if any(k in changes for k in SETTINGS):
+                new = p.settings() | {k: changes[k] for k in SETTINGS if k in changes}
+                if new.get("sigma_px") is None:
+                    raise InputError("sigma_px: must be a positive number, not null")
+                new = validate_settings(new, self.data_dir)
+                if new != p.settings():
+                    for k in SETTINGS:
+                        setattr(p, k, new[k])
+                    p.settings_rev += 1
+                    self._resolve_all(tx, p)
+            tx.update_project(p)
+            return p
+
+    def _resolve_all(self, tx: Transaction, p: Project) -> None:
+        for pt in tx.list_points(p.id):
+            self._solve_into(pt, p)
+            tx.update_point(pt)
+
+    def delete_project(self, pid: str) -> None:
+        with self.store.transaction() as tx:
+            if not tx.delete_project(pid):
+                raise NotFoundError(f"project '{pid}' does not exist")
+
+    # points ---------------------------------------------------------------------------
+    def _solve_into(self, pt: PointRecord, p: Project, strict: bool = False) -> None:
+        """Solve ``pt`` with the settings of ``p``; on failure store the reason (or raise)."""
+        sp = session_point(pt.id, pt.rays, pt.code, pt.description)
+        try:
+            m = measure(sp, p.settings(), pt.excluded, self.data_dir)
+            pt.result, pt.record = solved_fields(m)
+            pt.error = None
+        except GsgeoError as exc:
+            if strict:
+                raise
+            pt.result = pt.record = None
+            pt.error = str(exc)
+        pt.solved_rev = p.settings_rev
+
+    def list_points(self, pid: str) -> list[PointRecord]:
+        with self.store.transaction(write=False) as tx:
+            self._project(tx, pid)
+            return tx.list_points(pid)
+
+    def get_point(self, pid: str, point_id: str) -> PointRecord:
+        with self.store.transaction(write=False) as tx:
+            return self._point(tx, pid, point_id)
+
+    def _point(self, tx: Transaction, pid: str, point_id: str) -> PointRecord:
+        self._project(tx, pid)
+        pt = tx.get_point(pid, point_id)
+        if pt is None:
+            raise NotFoundError(f"point '{point_id}' does not exist in project '{pid}'")
+        return pt
+
+    @staticmethod
+    def _rays(rays: Any, where: str = "rays") -> list[dict[str, Any]]:
+        if not isinstance(rays, list):
+            raise InputError(f"{where}: expected a list of rays")
+        if len(rays) < 2:
+            raise InputError(f"{where}: a point needs at least two rays, got {len(rays)}")
+        if len(rays) > MAX_RAYS:
+            raise InputError(f"{where}: more than {MAX_RAYS} rays")
+        sp = session_point("x", rays)  # validates each ray, errors name point.rays[i]...
+        return [r.to_dict() for r in sp.rays]
+
+    def add_point(self, pid: str, doc: dict[str, Any]) -> PointRecord:
+        """Solve and store a point: doc = {id?, code?, description?, rays, excluded?}.
+
+        A point whose rays cannot be intersected is refused (GeometryError) and not stored.
+        """
+        try:
+            rays = self._rays(doc.get("rays"))
+        except InputError as exc:
+            raise InputError(str(exc).replace("x.rays", "rays", 1)) from None
+        code = _text(doc.get("code"), "code", 200)
+        description = _text(doc.get("description"), "description")
+        excluded = check_excluded(list(doc.get("excluded") or []), len(rays))
+        with self.store.transaction() as tx:
+            p = self._project(tx, pid)
+            if doc.get("id") is None:
+                point_id = self._next_id(tx.point_ids(pid))
+            else:
+                point_id = item_id(doc["id"], "id")
+                if tx.get_point(pid, point_id) is not None:
+                    raise ConflictError(f"id: point '{point_id}' already exists in project '{pid}'")
+            pt = PointRecord(project_id=pid, id=point_id, rays=rays, code=code,
+                             description=description, excluded=excluded)
+            self._solve_into(pt, p, strict=True)
+            tx.insert_point(pt)
+            return pt
+
+    @staticmethod
+    def _next_id(existing: list[str]) -> str:
+        nums = [int(m.group(1)) for s in existing if (m := re.fullmatch(r"P(\d{1,9})", s))]
+        return f"P{max(nums, default=0) + 1}"
+
+    def update_point(self, pid: str, point_id: str, changes: dict[str, Any]) -> PointRecord:
+        """Rename (id), recode (code, description), exclude or restore rays, or replace rays.
+
+        changes keys: id, code, description, excluded (full list of 0-based indices),
+        exclude_ray, restore_ray (one index), rays (replaces all rays; clears exclusions).
+        Changing rays or exclusions re-solves; a change that leaves the point unsolvable is
+        refused and nothing is written.
+        """
+        allowed = {"id", "code", "description", "excluded", "exclude_ray", "restore_ray", "rays"}
+        unknown = set(changes) - allowed
+        if unknown:
+            raise InputError(f"{sorted(unknown)[0]}: not a point field that can be changed")
+        with self.store.transaction() as tx:
+            p = self._project(tx, pid)
+            pt = self._point(tx, pid, point_id)
+            resolve = False
+            if changes.get("rays") is not None:
+                pt.rays = self._rays(changes["rays"])
+                pt.excluded = []
+                resolve = True
+            excluded = set(pt.excluded)
+            if changes.get("excluded") is not None:
+                excluded = set(changes["excluded"])
+            if changes.get("exclude_ray") is not None:
+                excluded.add(changes["exclude_ray"])
+            if changes.get("restore_ray") is not None:
+                i = changes["restore_ray"]
+                if i not in excluded:
+                    raise InputError(f"restore_ray: ray {i} is not excluded")
+                excluded.discard(i)
+            if sorted(excluded) != pt.excluded:
+                field = next((k for k in ("exclude_ray", "restore_ray", "excluded")
+                              if changes.get(k) is not None), "excluded")
+                pt.excluded = check_excluded(list(excluded), len(pt.rays), field)
+                resolve = True
+            if changes.get("code") is not None:
+                pt.code = _text(changes["code"], "code", 200)
+            if changes.get("description") is not None:
+                pt.description = _text(changes["description"], "description")
+            old_id = pt.id
+            if changes.get("id") is not None:
+                pt.id = item_id(changes["id"], "id")
+                if pt.id != old_id and tx.get_point(pid, pt.id) is not None:
+                    raise ConflictError(f"id: point '{pt.id}' already exists in project '{pid}'")
+            if resolve or pt.solved_rev != p.settings_rev:
+                self._solve_into(pt, p, strict=True)
+            else:
+                for blob in (pt.result, pt.record):
+                    if blob is not None:
+                        blob.update({"point_id": pt.id, "code": pt.code,
+                                     "description": pt.description})
+            tx.update_point(pt, old_id=old_id)
+            if pt.id != old_id:
+                for kind in KINDS:
+                    for f in tx.list_features(pid, kind):
+                        if old_id in f.point_ids:
+                            f.point_ids = [pt.id if q == old_id else q for q in f.point_ids]
+                            tx.update_feature(f)
+            return pt
+
+    def delete_point(self, pid: str, point_id: str) -> None:
+        """Delete a point; refused while a line or polygon uses it."""
+        with self.store.transaction() as tx:
+            self._point(tx, pid, point_id)
+            users = [f"{f.kind} '{f.id}'" for kind in KINDS for f in tx.list_features(pid, kind)
+                     if point_id in f.point_ids]
+            if users:
+                raise ConflictError(f"point '{point_id}' is used by {', '.join(users)}; "
+                                    "delete or change those first")
+            tx.delete_point(pid, point_id)
+
+    # lines and polygons ---------------------------------------------------------------
+    def _feature_points(self, tx: Transaction, pid: str, kind: str, ids: Any) -> list[str]:
+        if not isinstance(ids, list):
+            raise InputError("points: expected a list of point ids")
+        out = [item_id(v, f"points[{i}]") for i, v in enumerate(ids)]
+        if kind == "polygon" and len(out) > 1 and out[0] == out[-1]:
+            out = out[:-1]  # closing vertex given explicitly
+        if len(out) < KINDS[kind]:
+            raise InputError(f"points: a {kind} needs at least {KINDS[kind]} points, got {len(out)}")
+        if len(out) > MAX_FEATURE_POINTS:
+            raise InputError(f"points: more than {MAX_FEATURE_POINTS} points")
+        for i in range(1, len(out)):
+            if out[i] == out[i - 1]:
+                raise InputError(f"points[{i}]: point '{out[i]}' repeats the one before it")
+        known = set(tx.point_ids(pid))
+        for i, q in enumerate(out):
+            if q not in known:
+                raise InputError(f"points[{i}]: point '{q}' does not exist in project '{pid}'")
+        return out
+
+    def list_features(self, pid: str, kind: str) -> list[tuple[FeatureRecord, dict[str, Any]]]:
+        with self.store.transaction(write=False) as tx:
+            self._project(tx, pid)
+            feats = tx.list_features(pid, kind)
+            pts = {q.id: q for q in tx.list_points(pid)}
+        return [(f, feature_measures(f, pts)) for f in feats]
+
+    def get_feature(self, pid: str, kind: str, fid: str) -> tuple[FeatureRecord, dict[str, Any]]:
+        with self.store.transaction(write=False) as tx:
+            f = self._feature(tx, pid, kind, fid)
+            pts = {q.id: q for q in tx.list_points(pid)}
+        return f, feature_measures(f, pts)
+
+    def _feature(self, tx: Transaction, pid: str, kind: str, fid: str) -> FeatureRecord:
+        self._project(tx, pid)
+        f = tx.get_feature(pid, kind, fid)
+        if f is None:
+            raise NotFoundError(f"{kind} '{fid}' does not exist in project '{pid}'")
+        return f
+
+    def add_feature(self, pid: str, kind: str, doc: dict[str, Any]) -> FeatureRecord:
+        with self.store.transaction() as tx:
+            self._project(tx, pid)
+            ids = self._feature_points(tx, pid, kind, doc.get("points"))
+            if doc.get("id") is None:
+                prefix = "L" if kind == "line" else "A"
+                existing = [f.id for f in tx.list_features(pid, kind)]
+                nums = [int(m.group(1)) for s in existing
+                        if (m := re.fullmatch(prefix + r"(\d{1,9})", s))]
+                fid = f"{prefix}{max(nums, default=0) + 1}"
+            else:
+                fid = item_id(doc["id"], "id")
+                if tx.get_feature(pid, kind, fid) is not None:
+                    raise ConflictError(f"id: {kind} '{fid}' already exists in project '{pid}'")
+            f = FeatureRecord(project_id=pid, kind=kind, id=fid, point_ids=ids,
+                              code=_text(doc.get("code"), "code", 200),
+                              description=_text(doc.get("description"), "description"))
+            tx.insert_feature(f)
+            return f
+
+    def update_feature(self, pid: str, kind: str, fid: str, changes: dict[str, Any]) -> FeatureRecord:
+        unknown = set(changes) - {"id", "points", "code", "description"}
+        if unknown:
+            raise InputError(f"{sorted(unknown)[0]}: not a {kind} field that can be changed")
+        with self.store.transaction() as tx:
+            f = self._feature(tx, pid, kind, fid)
+            if changes.get("points") is not None:
+                f.point_ids = self._feature_points(tx, pid, kind, changes["points"])
+            if changes.get("code") is not None:
+                f.code = _text(changes["code"], "code", 200)
+            if changes.get("description") is not None:
+                f.description = _text(changes["description"], "description")
+            old = f.id
+            if changes.get("id") is not None:
+                f.id = item_id(changes["id"], "id")
+                if f.id != old and tx.get_feature(pid, kind, f.id) is not None:
+                    raise ConflictError(f"id: {kind} '{f.id}' already exists in project '{pid}'")
+            tx.update_feature(f, old_id=old)
+            return f
+
+    def delete_feature(self, pid: str, kind: str, fid: str) -> None:
+        with self.store.transaction() as tx:
+            self._feature(tx, pid, kind, fid)
+            tx.delete_feature(pid, kind, fid)
+
+    # check points ---------------------------------------------------------------------
+    def list_check_points(self, pid: str) -> list[CheckPointRecord]:
+        with self.store.transaction(write=False) as tx:
+            self._project(tx, pid)
+            return tx.list_check_points(pid)
+
+    def add_check_points(self, pid: str, rows: list[CheckPointRow], crs: str, *,
+                         role: str = "check", source: str = "", replace: bool = False) -> int:
+        """Store check points given in ``crs`` (all or nothing); ``replace`` drops the old ones."""
+        from gsgeo.crs.resolve import parse_crs
+
+        if role not in ("check", "control"):
+            raise InputError("role: must be 'check' or 'control'")
+        try:
+            parse_crs(crs)
+        except CRSError as exc:
+            raise CRSError(f"crs: {exc}") from None
+        recs = [CheckPointRecord(project_id=pid, id=r.id, x=r.x, y=r.y, z=r.z, crs=crs.strip(),
+                                 role=role, source=_text(source, "source", 300)) for r in rows]
+        with self.store.transaction() as tx:
+            self._project(tx, pid)
+            if replace:
+                tx.delete_all_check_points(pid)
+            tx.upsert_check_points(recs)
+        return len(recs)
+
+    def delete_check_point(self, pid: str, cid: str) -> None:
+        with self.store.transaction() as tx:
+            self._project(tx, pid)
+            if not tx.delete_check_point(pid, cid):
+                raise NotFoundError(f"check point '{cid}' does not exist in project '{pid}'")
+
+    def delete_all_check_points(self, pid: str) -> int:
+        with self.store.transaction() as tx:
+            self._project(tx, pid)
+            return tx.delete_all_check_points(pid)
+
+    def accuracy(self, pid: str, role: str = "check") -> dict[str, Any]:
+        """Measured minus check point coordinates in the project's grid, matched by id."""
+        with self.store.transaction(write=False) as tx:
+            p = self._project(tx, pid)
+            pts = tx.list_points(pid)
+            cps = [c for c in tx.list_check_points(pid) if c.role == role]
+        if p.crs is None:
+            raise InputError(f"crs: project '{pid}' has no grid CRS; set one to compare with "
+                             "check points")
+        solved = {q.id: q.record for q in pts if q.record is not None
+                  and q.record.get("easting") is not None}
+        matched = [c for c in cps if c.id in solved]
+        grid = check_points_in_grid(matched, p.crs)
+        meas = np.array([[solved[c.id]["easting"], solved[c.id]["northing"],
+                          np.nan if solved[c.id].get("height") is None else solved[c.id]["height"]]
+                         for c in matched], dtype=float).reshape(-1, 3)
+        rep = accuracy_report([c.id for c in matched], meas, grid)
+        height_types = sorted({str(solved[c.id].get("vertical_datum") or
+                                   solved[c.id].get("height_type")) for c in matched})
+        rep["counts"] = {
+            "check_points": len(cps), "measured_points": len(pts), "solved_points": len(solved),
+            "matched": len(matched), "matched_vertical": rep["statistics"]["n_vertical"],
+            "check_points_not_measured": sorted(c.id for c in cps if c.id not in solved),
+            "measured_points_without_check": sorted(set(solved) - {c.id for c in cps}),
+        }
+        rep["crs"] = p.crs
+        rep["units"] = "metres; differences are measured minus check"
+        rep["heights"] = ("check point heights are compared as given: they must be in the "
+                          f"project's height system ({', '.join(height_types) or 'none'})")
+        return json_ready(rep)
+
+
+def check_points_in_grid(cps: list[CheckPointRecord], crs: str) -> np.ndarray:
+    """(M, 3) easting, northing, height of check points in the project's horizontal grid CRS.
+
+    Horizontal coordinates go through PROJ from each check point's CRS; heights are taken
+    as given (NaN where missing).
+    """
+    from gsgeo.crs.resolve import parse_crs, projected_crs
+    from gsgeo.crs.transformers import transformer
+
+    out = np.full((len(cps), 3), np.nan)
+    target = projected_crs(crs)
+    for src in sorted({c.crs for c in cps}):
+        idx = [i for i, c in enumerate(cps) if c.crs == src]
+        xyz = np.array([[cps[i].x, cps[i].y, np.nan if cps[i].z is None else cps[i].z]
+                        for i in idx], dtype=float)
+        s = parse_crs(src)
+        horiz = s.sub_crs_list[0] if s.is_compound else s
+        if horiz.equals(target):
+            e, n = xyz[:, 0], xyz[:, 1]
+        else:
+            t = transformer(horiz.to_wkt(), target.to_wkt())
+            e, n = t.transform(xyz[:, 0], xyz[:, 1])
+        out[idx, 0], out[idx, 1], out[idx, 2] = e, n, xyz[:, 2]
+    if not np.all(np.isfinite(out[:, :2])):
+        raise CRSError("check points: some cannot be transformed into the project's grid CRS")
+    return out
+
+
+def feature_measures(f: FeatureRecord, points: dict[str, PointRecord]) -> dict[str, Any]:
+    """Lengths (line) or area and perimeter (polygon) with sigmas, from the points' grid
+    coordinates and covariances (gsgeo.export.features)."""
+    recs = []
+    for q in f.point_ids:
+        pt = points.get(q)
+        if pt is None or pt.record is None or pt.record.get("easting") is None:
+            why = "does not exist" if pt is None else "has no grid coordinates"
+            return {"error": f"point '{q}' {why}"}
+        recs.append(pt.record)
+    xyz = np.array([[r["easting"], r["northing"],
+                     math.nan if r.get("height") is None else r["height"]] for r in recs])
+    cov = np.array([[[r["cov_ee"], r["cov_en"], r["cov_eh"]],
+                     [r["cov_en"], r["cov_nn"], r["cov_nh"]],
+                     [r["cov_eh"], r["cov_nh"], r["cov_hh"]]] for r in recs], dtype=float)
+    try:
+        from gsgeo.export import features as geo
+    except ImportError:
+        return {"error": "lengths and areas are not available (gsgeo.export.features missing)"}
+    try:
+        if f.kind == "line":
+            m = geo.line_measures(xyz, cov)
+        else:
+            m = geo.polygon_measures(xyz, cov)
+    except GsgeoError as exc:
+        return {"error": str(exc)}
+    return json_ready(m if isinstance(m, dict) else vars(m))

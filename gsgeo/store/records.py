@@ -1,0 +1,102 @@
+"""What a project holds, as plain records a storage backend reads and writes.
+
+Rays are kept exactly as the session-JSON ray dicts of DESIGN.md ("Session JSON"); they are
+the source of truth. The solved result of a point (``result``: the JSON of
+``Measurement.to_dict()``, ``record``: the point-schema row) is derived data, recomputed from
+the rays whenever the project's CRS, vertical datum, source CRS or sigma_px changes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from gsgeo.errors import GsgeoError, InputError
+
+
+class NotFoundError(GsgeoError, LookupError):
+    """A project, point, line, polygon or check point does not exist (HTTP 404)."""
+
+
+class ConflictError(InputError):
+    """The change clashes with what is stored, e.g. a duplicate id (HTTP 409)."""
+
+
+@dataclass
+class Project:
+    """A measuring project: its scene and the settings its points are solved with.
+
+    ``settings_rev`` counts changes of the solving settings (crs, vertical, geoid,
+    source_crs, sigma_px); a point's result is current when its ``solved_rev`` equals it.
+    """
+
+    id: str
+    name: str
+    scene: str | None = None
+    crs: str | None = None
+    vertical: str | None = None
+    geoid: str | None = None
+    source_crs: str = "EPSG:4978"
+    sigma_px: float = 1.0
+    description: str = ""
+    settings_rev: int = 0
+    created_at: str = ""
+    updated_at: str = ""
+
+    def settings(self) -> dict[str, Any]:
+        """The settings a point is solved with."""
+        return {"crs": self.crs, "vertical": self.vertical, "geoid": self.geoid,
+                "source_crs": self.source_crs, "sigma_px": self.sigma_px}
+
+
+@dataclass
+class PointRecord:
+    """One measured point: its rays (session-JSON dicts), exclusions and solved result."""
+
+    project_id: str
+    id: str
+    rays: list[dict[str, Any]]
+    code: str = ""
+    description: str = ""
+    excluded: list[int] = field(default_factory=list)  # 0-based ray indices left out
+    result: dict[str, Any] | None = None  # Measurement.to_dict(); None when not solved
+    record: dict[str, Any] | None = None  # point-schema row (Measurement.record())
+    error: str | None = None  # why the point could not be solved with the current settings
+    solved_rev: int = -1
+    seq: int = 0  # creation order
+    created_at: str = ""
+    updated_at: str = ""
+
+
+@dataclass
+class FeatureRecord:
+    """A line or polygon: an ordered list of point ids (kind 'line' or 'polygon')."""
+
+    project_id: str
+    kind: str
+    id: str
+    point_ids: list[str]
+    code: str = ""
+    description: str = ""
+    seq: int = 0
+    created_at: str = ""
+    updated_at: str = ""
+
+
+@dataclass
+class CheckPointRecord:
+    """Ground truth (role 'check') or control (role 'control') in the CRS it was given in.
+
+    Coordinates are easting/northing/height (or x/y/z, lon/lat/h as the CRS's axis order
+    puts them, always x = easting or longitude first); height may be missing.
+    """
+
+    project_id: str
+    id: str
+    x: float
+    y: float
+    z: float | None
+    crs: str
+    role: str = "check"
+    source: str = ""
+    created_at: str = ""

@@ -1,0 +1,71 @@
+"""Solving a stored point from its rays with its project's settings (through gsgeo.crs)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from gsgeo.errors import CRSError, InputError
+from gsgeo.session import SessionPoint, parse_point
+
+
+def json_ready(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by None (JSON has no NaN)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy scalars and arrays
+        return json_ready(value.tolist())
+    return value
+
+
+def session_point(point_id: str, rays: list[dict], code: str = "", description: str = "",
+                  where: str = "") -> SessionPoint:
+    """Validate rays (session-JSON dicts) into a SessionPoint; errors name ``where``rays[i]."""
+    return parse_point({"id": point_id, "code": code, "description": description, "rays": rays},
+                       where.rstrip(".") or "point")
+
+
+def check_excluded(excluded: list[int], n_rays: int, where: str = "excluded") -> list[int]:
+    out = sorted({int(i) for i in excluded})
+    for i in out:
+        if not 0 <= i < n_rays:
+            raise InputError(f"{where}: ray index {i} is out of range (the point has {n_rays} "
+                             f"rays, indices 0 to {n_rays - 1})")
+    if n_rays - len(out) < 2:
+        raise InputError(f"{where}: at least two rays must remain in the solution "
+                         f"({n_rays} rays, {len(out)} excluded)")
+    return out
+
+
+def resolve_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
+    """A geoid named in a project is a file in DATA/geoids/ (never an arbitrary path)."""
+    if not geoid:
+        return None
+    if data_dir is None:
+        raise CRSError("geoid: no data directory to look up geoid grids in")
+    gdir = (Path(data_dir) / "geoids").resolve()
+    path = (gdir / geoid).resolve()
+    if path.parent != gdir or not path.is_file():
+        raise CRSError(f"geoid: no geoid grid '{geoid}' in {gdir} (put the GeoTIFF there)")
+    return path
+
+
+def measure(point: SessionPoint, settings: dict[str, Any], excluded: list[int],
+            data_dir: Path | None = None):
+    """The gsgeo.crs.pipeline Measurement of ``point`` with a project's ``settings``."""
+    from gsgeo.crs.pipeline import measure_point
+
+    return measure_point(point, crs=settings.get("crs"), vertical=settings.get("vertical"),
+                         geoid=resolve_geoid(settings.get("geoid"), data_dir),
+                         source_crs=settings.get("source_crs") or "EPSG:4978",
+                         sigma_px=float(settings.get("sigma_px") or 1.0), exclude=excluded)
+
+
+def solved_fields(m) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(result, record) of a Measurement as JSON-ready dicts."""
+    return json_ready(m.to_dict()), json_ready(m.record())

@@ -1,0 +1,363 @@
+"""The embedded store: one SQLite file (WAL journal), schema versioned by migrations.
+
+Durability: WAL with ``synchronous=FULL``, so a committed change survives a kill -9 and a
+power cut; a transaction that has not committed leaves no trace. Each thread gets its own
+connection; write transactions start with ``BEGIN IMMEDIATE`` so two writers never
+interleave (the second waits up to ``busy_timeout``).
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from gsgeo.errors import GsgeoError
+from gsgeo.store.base import Store, Transaction
+from gsgeo.store.migrations import MIGRATIONS, SCHEMA_VERSION
+from gsgeo.store.records import (
+    CheckPointRecord,
+    ConflictError,
+    FeatureRecord,
+    PointRecord,
+    Project,
+)
+
+#: File name of the store inside the data directory.
+DB_NAME = "gsgeo.sqlite"
+BUSY_TIMEOUT_MS = 30_000
+
+
+class StoreError(GsgeoError):
+    """The store file cannot be opened or is of an unknown (newer) schema."""
+
+
+def now_iso() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _dumps(value: Any) -> str:
+    return json.dumps(value, separators=(",", ":"), allow_nan=False)
+
+
+def _loads(text: str | None) -> Any:
+    return None if text is None else json.loads(text)
+
+
+class SQLiteTransaction(Transaction):
+    def __init__(self, con: sqlite3.Connection):
+        self.con = con
+
+    def _one(self, sql: str, args: tuple = ()) -> sqlite3.Row | None:
+        return self.con.execute(sql, args).fetchone()
+
+    def _all(self, sql: str, args: tuple = ()) -> list[sqlite3.Row]:
+        return self.con.execute(sql, args).fetchall()
+
+    def _insert(self, sql: str, args: tuple, what: str) -> None:
+        try:
+            self.con.execute(sql, args)
+        except sqlite3.IntegrityError as exc:
+            if "UNIQUE" in str(exc) or "PRIMARY KEY" in str(exc):
+                raise ConflictError(f"{what} already exists") from None
+            raise
+
+    # projects -------------------------------------------------------------------------
+    @staticmethod
+    def _project(row: sqlite3.Row) -> Project:
+        return Project(id=row["id"], name=row["name"], description=row["description"],
+                       scene=row["scene"], crs=row["crs"], vertical=row["vertical"],
+                       geoid=row["geoid"], source_crs=row["source_crs"],
+                       sigma_px=row["sigma_px"], settings_rev=row["settings_rev"],
+                       created_at=row["created_at"], updated_at=row["updated_at"])
+
+    def list_projects(self) -> list[Project]:
+        return [self._project(r) for r in self._all("SELECT * FROM projects ORDER BY created_at, id")]
+
+    def get_project(self, pid: str) -> Project | None:
+        row = self._one("SELECT * FROM projects WHERE id = ?", (pid,))
+        return None if row is None else self._project(row)
+
+    def insert_project(self, p: Project) -> None:
+        p.created_at = p.updated_at = now_iso()
+        self._insert(
+            "INSERT INTO projects (id, name, description, scene, crs, vertical, geoid, source_crs,"
+            " sigma_px, settings_rev, created_at, updated_at) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            (p.id, p.name, p.description, p.scene, p.crs, p.vertical, p.geoid, p.source_crs,
+             p.sigma_px, p.settings_rev, p.created_at, p.updated_at),
+            f"project '{p.id}'",
+        )
+
+    def update_project(self, p: Project) -> None:
+        p.updated_at = now_iso()
+        self.con.execute(
+            "UPDATE projects SET name=?, description=?, scene=?, crs=?, vertical=?, geoid=?,"
+            " source_crs=?, sigma_px=?, settings_rev=?, updated_at=? WHERE id=?",
+            (p.name, p.description, p.scene, p.crs, p.vertical, p.geoid, p.source_crs,
+             p.sigma_px, p.settings_rev, p.updated_at, p.id),
+        )
+
+    def delete_project(self, pid: str) -> bool:
+        return self.con.execute("DELETE FROM projects WHERE id = ?", (pid,)).rowcount > 0
+
+    # points ---------------------------------------------------------------------------
+    @staticmethod
+    def _point(row: sqlite3.Row) -> PointRecord:
+        return PointRecord(project_id=row["project_id"], id=row["id"], seq=row["seq"],
+                           code=row["code"], description=row["description"],
+                           rays=json.loads(row["rays"]), excluded=json.loads(row["excluded"]),
+                           result=_loads(row["result"]), record=_loads(row["record"]),
+                           error=row["error"], solved_rev=row["solved_rev"],
+                           created_at=row["created_at"], updated_at=row["updated_at"])
+
+    def list_points(self, pid: str) -> list[PointRecord]:
+        rows = self._all("SELECT * FROM points WHERE project_id = ? ORDER BY seq", (pid,))
+        return [self._point(r) for r in rows]
+
+    def get_point(self, pid: str, point_id: str) -> PointRecord | None:
+        row = self._one("SELECT * FROM points WHERE project_id = ? AND id = ?", (pid, point_id))
+        return None if row is None else self._point(row)
+
+    def point_ids(self, pid: str) -> list[str]:
+        rows = self._all("SELECT id FROM points WHERE project_id = ? ORDER BY seq", (pid,))
+        return [r[0] for r in rows]
+
+    def insert_point(self, p: PointRecord) -> None:
+        p.created_at = p.updated_at = now_iso()
+        p.seq = self._one("SELECT COALESCE(MAX(seq), 0) + 1 FROM points WHERE project_id = ?",
+                          (p.project_id,))[0]
+        self._insert(
+            "INSERT INTO points (project_id, id, seq, code, description, rays, excluded, result,"
+            " record, error, solved_rev, created_at, updated_at)"
+            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            (p.project_id, p.id, p.seq, p.code, p.description, _dumps(p.rays),
+             _dumps(p.excluded), None if p.result is None else _dumps(p.result),
+             None if p.record is None else _dumps(p.record), p.error, p.solved_rev,
+             p.created_at, p.updated_at),
+            f"point '{p.id}'",
+        )
+
+    def update_point(self, p: PointRecord, old_id: str | None = None) -> None:
+        p.updated_at = now_iso()
+        try:
+            self.con.execute(
+                "UPDATE points SET id=?, code=?, description=?, rays=?, excluded=?, result=?,"
+                " record=?, error=?, solved_rev=?, updated_at=? WHERE project_id=? AND id=?",
+                (p.id, p.code, p.description, _dumps(p.rays), _dumps(p.excluded),
+                 None if p.result is None else _dumps(p.result),
+                 None if p.record is None else _dumps(p.record), p.error, p.solved_rev,
+                 p.updated_at, p.project_id, old_id or p.id),
+            )
+        except sqlite3.IntegrityError as exc:
+            if "UNIQUE" in str(exc) or "PRIMARY KEY" in str(exc):
+                raise ConflictError(f"point '{p.id}' already exists") from None
+            raise
+
+    def delete_point(self, pid: str, point_id: str) -> bool:
+        cur = self.con.execute("DELETE FROM points WHERE project_id = ? AND id = ?", (pid, point_id))
+        return cur.rowcount > 0
+
+    # lines and polygons ---------------------------------------------------------------
+    @staticmethod
+    def _feature(row: sqlite3.Row) -> FeatureRecord:
+        return FeatureRecord(project_id=row["project_id"], kind=row["kind"], id=row["id"],
+                             seq=row["seq"], point_ids=json.loads(row["point_ids"]),
+                             code=row["code"], description=row["description"],
+                             created_at=row["created_at"], updated_at=row["updated_at"])
+
+    def list_features(self, pid: str, kind: str) -> list[FeatureRecord]:
+        rows = self._all("SELECT * FROM features WHERE project_id = ? AND kind = ? ORDER BY seq",
+                         (pid, kind))
+        return [self._feature(r) for r in rows]
+
+    def get_feature(self, pid: str, kind: str, fid: str) -> FeatureRecord | None:
+        row = self._one("SELECT * FROM features WHERE project_id = ? AND kind = ? AND id = ?",
+                        (pid, kind, fid))
+        return None if row is None else self._feature(row)
+
+    def insert_feature(self, f: FeatureRecord) -> None:
+        f.created_at = f.updated_at = now_iso()
+        f.seq = self._one("SELECT COALESCE(MAX(seq), 0) + 1 FROM features WHERE project_id = ?"
+                          " AND kind = ?", (f.project_id, f.kind))[0]
+        self._insert(
+            "INSERT INTO features (project_id, kind, id, seq, point_ids, code, description,"
+            " created_at, updated_at) VALUES (?,?,?,?,?,?,?,?,?)",
+            (f.project_id, f.kind, f.id, f.seq, _dumps(f.point_ids), f.code, f.description,
+             f.created_at, f.updated_at),
+            f"{f.kind} '{f.id}'",
+        )
+
+    def update_feature(self, f: FeatureRecord, old_id: str | None = None) -> None:
+        f.updated_at = now_iso()
+        try:
+            self.con.execute(
+                "UPDATE features SET id=?, point_ids=?, code=?, description=?, updated_at=?"
+                " WHERE project_id=? AND kind=? AND id=?",
+                (f.id, _dumps(f.point_ids), f.code, f.description, f.updated_at,
+                 f.project_id, f.kind, old_id or f.id),
+            )
+        except sqlite3.IntegrityError as exc:
+            if "UNIQUE" in str(exc) or "PRIMARY KEY" in str(exc):
+                raise ConflictError(f"{f.kind} '{f.id}' already exists") from None
+            raise
+
+    def delete_feature(self, pid: str, kind: str, fid: str) -> bool:
+        cur = self.con.execute("DELETE FROM features WHERE project_id = ? AND kind = ? AND id = ?",
+                               (pid, kind, fid))
+        return cur.rowcount > 0
+
+    # check points ---------------------------------------------------------------------
+    def list_check_points(self, pid: str) -> list[CheckPointRecord]:
+        rows = self._all("SELECT * FROM check_points WHERE project_id = ? ORDER BY id", (pid,))
+        return [CheckPointRecord(project_id=r["project_id"], id=r["id"], x=r["x"], y=r["y"],
+                                 z=r["z"], crs=r["crs"], role=r["role"], source=r["source"],
+                                 created_at=r["created_at"]) for r in rows]
+
+    def upsert_check_points(self, records: list[CheckPointRecord]) -> None:
+        t = now_iso()
+        self.con.executemany(
+            "INSERT INTO check_points (project_id, id, x, y, z, crs, role, source, created_at)"
+            " VALUES (?,?,?,?,?,?,?,?,?) ON CONFLICT (project_id, id) DO UPDATE SET"
+            " x=excluded.x, y=excluded.y, z=excluded.z, crs=excluded.crs, role=excluded.role,"
+            " source=excluded.source, created_at=excluded.created_at",
+            [(c.project_id, c.id, c.x, c.y, c.z, c.crs, c.role, c.source, t) for c in records],
+        )
+
+    def delete_check_point(self, pid: str, cid: str) -> bool:
+        cur = self.con.execute("DELETE FROM check_points WHERE project_id = ? AND id = ?", (pid, cid))
+        return cur.rowcount > 0
+
+    def delete_all_check_points(self, pid: str) -> int:
+        return self.con.execute("DELETE FROM check_points WHERE project_id = ?", (pid,)).rowcount
+
+
+class SQLiteStore(Store):
+    """Projects in one SQLite file.
+
+    ``path`` is the database file (created with its directory when absent).
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StoreError(f"{self.path.parent}: cannot create the data directory: {exc}") from None
+        self._local = threading.local()
+        self._connections: list[sqlite3.Connection] = []
+        self._lock = threading.Lock()
+        self._closed = False
+        self._migrate()
+
+    def _connect(self) -> sqlite3.Connection:
+        con = getattr(self._local, "con", None)
+        if con is not None:
+            return con
+        if self._closed:
+            raise StoreError("the store is closed")
+        try:
+            con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000,
+                                  isolation_level=None, check_same_thread=False)
+            con.row_factory = sqlite3.Row
+            mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+            if mode.lower() != "wal":
+                raise StoreError(f"{self.path}: cannot switch to WAL journal mode (got {mode})")
+            con.execute("PRAGMA synchronous=FULL")
+            con.execute("PRAGMA foreign_keys=ON")
+            con.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{self.path}: cannot open as a gsgeo store: {exc}") from None
+        self._local.con = con
+        self._local.depth = 0
+        with self._lock:
+            self._connections.append(con)
+        return con
+
+    def _migrate(self) -> None:
+        con = self._connect()
+        try:
+            con.execute("BEGIN IMMEDIATE")
+            version = con.execute("PRAGMA user_version").fetchone()[0]
+            if version > SCHEMA_VERSION:
+                con.execute("ROLLBACK")
+                raise StoreError(
+                    f"{self.path}: schema version {version} is newer than this gsgeo "
+                    f"understands ({SCHEMA_VERSION}); upgrade gsgeo")
+            con.execute("COMMIT")
+            for v in range(version, SCHEMA_VERSION):
+                con.execute("BEGIN IMMEDIATE")
+                try:
+                    # re-check under the write lock: another process may have migrated
+                    if con.execute("PRAGMA user_version").fetchone()[0] != v:
+                        con.execute("ROLLBACK")
+                        continue
+                    for stmt in _statements(MIGRATIONS[v]):
+                        con.execute(stmt)
+                    con.execute(f"PRAGMA user_version = {v + 1}")
+                    con.execute("COMMIT")
+                except BaseException:
+                    if con.in_transaction:
+                        con.execute("ROLLBACK")
+                    raise
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{self.path}: cannot open as a gsgeo store: {exc}") from None
+
+    @property
+    def schema_version(self) -> int:
+        return self._connect().execute("PRAGMA user_version").fetchone()[0]
+
+    @contextmanager
+    def transaction(self, write: bool = True) -> Iterator[SQLiteTransaction]:
+        con = self._connect()
+        if self._local.depth:  # nested: part of the enclosing transaction
+            self._local.depth += 1
+            try:
+                yield SQLiteTransaction(con)
+            finally:
+                self._local.depth -= 1
+            return
+        con.execute("BEGIN IMMEDIATE" if write else "BEGIN")
+        self._local.depth = 1
+        try:
+            yield SQLiteTransaction(con)
+        except BaseException:
+            if con.in_transaction:
+                con.execute("ROLLBACK")
+            raise
+        else:
+            con.execute("COMMIT")
+        finally:
+            self._local.depth = 0
+
+    def check_integrity(self) -> list[str]:
+        con = self._connect()
+        problems = [r[0] for r in con.execute("PRAGMA integrity_check").fetchall() if r[0] != "ok"]
+        problems += [f"foreign key violation in {r[0]} row {r[1]}"
+                     for r in con.execute("PRAGMA foreign_key_check").fetchall()]
+        return problems
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            for con in self._connections:
+                try:
+                    con.close()
+                except sqlite3.Error:
+                    pass
+            self._connections.clear()
+        self._local = threading.local()
+
+
+def _statements(script: str) -> list[str]:
+    """Split a migration script into statements (no semicolons inside our literals)."""
+    return [s.strip() for s in script.split(";") if s.strip()]
+
+
+def open_store(data_dir: str | Path) -> SQLiteStore:
+    """The store of a data directory: ``DATA/gsgeo.sqlite``."""
+    return SQLiteStore(Path(data_dir) / DB_NAME)
