@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from solve_helpers import TRUTH_ECEF, aim_with_noise, camera_network, perpendicular_basis
 
 from gsgeo.errors import GeometryError, InputError
 from gsgeo.solve import SCALE_95_3D, intersect, intersect_batch
+from gsgeo.solve.simulate import TRUTH_ECEF, aim_with_noise, camera_network, perpendicular_basis
 
 IFOV = 2 * np.tan(np.radians(30)) / 1080  # 60 degree vertical field of view on 1080 px
 

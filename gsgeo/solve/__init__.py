@@ -1,6 +1,6 @@
 """Multi-ray least-squares intersection in any Cartesian frame (pure numpy, no CRS)."""
 
-from gsgeo.solve.intersect import (
+from gsgeo.solve.intersection import (
     PARALLEL_LIMIT_DEG,
     WEAK_GEOMETRY_DEG,
     BatchResult,

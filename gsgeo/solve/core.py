@@ -5,6 +5,10 @@ contributes two observation equations, the components of the perpendicular offse
 point from the ray; the normal matrix is sum w_i (I - d_i d_i^T), which is rotation invariant
 and has rank 2 per ray, so no ray direction is privileged (the paper's printed two-row cross
 product system loses rank for a ray parallel to the x-axis and is not used).
+
+The arithmetic runs on per-component arrays laid out rays-major, (N, M), rather than (M, N, 3)
+stacks: sums over the rays become N contiguous row additions, and with a closed-form 3 x 3
+inverse this is several times faster than einsum and ``numpy.linalg`` over millions of points.
 """
 
 from __future__ import annotations
@@ -13,27 +17,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gsgeo.solve.linalg import sym3_inverse, sym3_matvec
-
 #: Iterations of the angular model at most; ranges change little after the first pass.
 MAX_ITERATIONS = 20
-#: Relative change of the point (to its mean range) at which the iteration stops.
-CONVERGENCE = 1e-13
+#: Change of the point, relative to its mean range, at which a point stops iterating
+#: (0.1 micrometre at 100 m; each pass shrinks the change about a thousandfold).
+CONVERGENCE = 1e-9
 
 
 @dataclass
 class CoreSolution:
-    """Raw solution for M points of N rays each (frame of the input, centred back)."""
+    """Raw solution for M points of N rays each (frame of the input)."""
 
     points: np.ndarray  # (M, 3)
     normal_inverse: np.ndarray  # (M, 3, 3) inverse of sum w (I - d d^T); m^2 if weighted
-    offsets: np.ndarray  # (M, N, 3) perpendicular offset of the point from each ray
     residuals_m: np.ndarray  # (M, N) perpendicular distances
     ranges: np.ndarray  # (M, N) distance along each ray to the foot of the perpendicular
     weights: np.ndarray | None  # (M, N) 1 / sigma_i^2 in 1/m^2, or None (unweighted)
     sigma_m: np.ndarray | None  # (M, N) a-priori metric precision of each ray
     vtpv: np.ndarray  # (M,) weighted sum of squared residuals (m^2 when unweighted)
-    det: np.ndarray  # (M,) determinant of the normal matrix (scaled, for rank checks)
     iterations: int
 
 
@@ -44,27 +45,51 @@ def unit_directions(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return directions / norm[..., None], norm
 
 
-def _normal_system(
-    origins: np.ndarray, d: np.ndarray, w: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Normal matrix sum w (I - d d^T) (M, 3, 3) and right side sum w (o - d (d.o)) (M, 3)."""
-    wd = d if w is None else d * w[..., None]
-    wsum = d.shape[1] if w is None else w.sum(axis=1)
-    n = -np.einsum("mki,mkj->mij", wd, d)
-    n[:, 0, 0] += wsum
-    n[:, 1, 1] += wsum
-    n[:, 2, 2] += wsum
-    do = np.einsum("mki,mki->mk", d, origins)
-    wo = origins if w is None else origins * w[..., None]
-    b = wo.sum(axis=1) - np.einsum("mki,mk->mi", wd, do)
-    return n, b
+def _solve(o, d, do, w):
+    """Solve the normal equations for component arrays o = (ox, oy, oz), d = (dx, dy, dz), (N, M).
+
+    Returns the point components (each (M,)) and the six unique entries of the inverse normal
+    matrix (00, 01, 02, 11, 12, 22). ``do`` is d . o per ray, constant over the iterations.
+    """
+    ox, oy, oz = o
+    dx, dy, dz = d
+    if w is None:
+        wsum = float(dx.shape[0])
+        wdx, wdy, wdz = dx, dy, dz
+        wox, woy, woz = ox, oy, oz
+    else:
+        wsum = w.sum(axis=0)
+        wdx, wdy, wdz = w * dx, w * dy, w * dz
+        wox, woy, woz = w * ox, w * oy, w * oz
+    n00 = wsum - (wdx * dx).sum(axis=0)
+    n11 = wsum - (wdy * dy).sum(axis=0)
+    n22 = wsum - (wdz * dz).sum(axis=0)
+    n01 = -(wdx * dy).sum(axis=0)
+    n02 = -(wdx * dz).sum(axis=0)
+    n12 = -(wdy * dz).sum(axis=0)
+    b0 = wox.sum(axis=0) - (wdx * do).sum(axis=0)
+    b1 = woy.sum(axis=0) - (wdy * do).sum(axis=0)
+    b2 = woz.sum(axis=0) - (wdz * do).sum(axis=0)
+    c00 = n11 * n22 - n12 * n12
+    c01 = n02 * n12 - n01 * n22
+    c02 = n01 * n12 - n02 * n11
+    c11 = n00 * n22 - n02 * n02
+    c12 = n01 * n02 - n00 * n12
+    c22 = n00 * n11 - n01 * n01
+    det = n00 * c00 + n01 * c01 + n02 * c02
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = 1.0 / det
+    q = (c00 * inv_det, c01 * inv_det, c02 * inv_det, c11 * inv_det, c12 * inv_det, c22 * inv_det)
+    x = q[0] * b0 + q[1] * b1 + q[2] * b2
+    y = q[1] * b0 + q[3] * b1 + q[4] * b2
+    z = q[2] * b0 + q[4] * b1 + q[5] * b2
+    return (x, y, z), q
 
 
-def _solve(origins: np.ndarray, d: np.ndarray, w: np.ndarray | None):
-    n, b = _normal_system(origins, d, w)
-    ninv, det = sym3_inverse(n)
-    x = sym3_matvec(ninv, b)
-    return x, ninv, det
+def _ranges(p, o, d):
+    return (
+        (p[0] - o[0]) * d[0] + (p[1] - o[1]) * d[1] + (p[2] - o[2]) * d[2]
+    )
 
 
 def solve_core(
@@ -78,43 +103,123 @@ def solve_core(
     Coordinates are centred on the mean origin of each point before the normal equations are
     formed, so ECEF-sized inputs keep their precision.
     """
-    centre = origins.mean(axis=1, keepdims=True)
-    o = origins - centre
-    d = directions_unit
-    x, ninv, det = _solve(o, d, None)
+    centre = origins.mean(axis=1)
+    o = tuple(np.ascontiguousarray(origins[..., k].T - centre[:, k]) for k in range(3))
+    d = tuple(np.ascontiguousarray(directions_unit[..., k].T) for k in range(3))
+    f = None if ifov is None else np.ascontiguousarray(ifov.T)
+    do = d[0] * o[0] + d[1] * o[1] + d[2] * o[2]
+    p, q = _solve(o, d, do, None)
     weights = sigma = None
     iterations = 1
     if ifov is not None:
-        # Angular model: sigma_i = sigma_px * ifov_i * range_i; iterate because ranges depend
-        # on the point.
+        # Angular model: sigma_i = sigma_px * ifov_i * range_i; iterate because the ranges
+        # depend on the point. Points that have converged drop out of later passes.
+        p = [c.copy() for c in p]
+        q = [c.copy() for c in q]
+        weights = np.empty_like(f)
+        sigma = np.empty_like(f)
+        idx = np.arange(f.shape[1])
         for iterations in range(2, MAX_ITERATIONS + 2):  # noqa: B007
-            t = np.einsum("mki,mki->mk", x[:, None, :] - o, d)
+            full = idx.size == f.shape[1]
+            oi = o if full else tuple(c[:, idx] for c in o)
+            di = d if full else tuple(c[:, idx] for c in d)
+            doi = do if full else do[:, idx]
+            pi = p if full else [c[idx] for c in p]
+            t = _ranges(pi, oi, di)
             # A non-positive range means the point is behind a camera; keep the weight finite
             # here and let the caller reject the geometry.
             t_safe = np.where(t > 0, t, np.abs(t) + 1e-9)
+            s_i = sigma_px * (f if full else f[:, idx]) * t_safe
+            w_i = 1.0 / (s_i * s_i)
+            p_new, q_new = _solve(oi, di, doi, w_i)
+            step2 = (p_new[0] - pi[0]) ** 2 + (p_new[1] - pi[1]) ** 2 + (p_new[2] - pi[2]) ** 2
+            scale = np.maximum(t_safe.mean(axis=0), 1e-9)
+            sigma[:, idx] = s_i
+            weights[:, idx] = w_i
+            for k in range(3):
+                p[k][idx] = p_new[k]
+            for k in range(6):
+                q[k][idx] = q_new[k]
+            idx = idx[step2 > (CONVERGENCE * scale) ** 2]
+            if idx.size == 0:
+                break
+    t = _ranges(p, o, d)
+    rx = p[0] - o[0] - t * d[0]
+    ry = p[1] - o[1] - t * d[1]
+    rz = p[2] - o[2] - t * d[2]
+    r2 = rx * rx + ry * ry + rz * rz
+    vtpv = r2.sum(axis=0) if weights is None else (weights * r2).sum(axis=0)
+    m = centre.shape[0]
+    ninv = np.empty((m, 3, 3))
+    ninv[:, 0, 0], ninv[:, 0, 1], ninv[:, 0, 2] = q[0], q[1], q[2]
+    ninv[:, 1, 0], ninv[:, 1, 1], ninv[:, 1, 2] = q[1], q[3], q[4]
+    ninv[:, 2, 0], ninv[:, 2, 1], ninv[:, 2, 2] = q[2], q[4], q[5]
+    return CoreSolution(
+        points=np.stack(p, axis=1) + centre,
+        normal_inverse=ninv,
+        residuals_m=np.sqrt(r2).T,
+        ranges=t.T,
+        weights=None if weights is None else weights.T,
+        sigma_m=None if sigma is None else sigma.T,
+        vtpv=vtpv,
+        iterations=iterations,
+    )
+
+
+def solve_one(
+    origins: np.ndarray,
+    directions_unit: np.ndarray,
+    ifov: np.ndarray | None,
+    sigma_px: float,
+) -> CoreSolution:
+    """`solve_core` for a single point, origins and unit directions (N, 3), ifov (N,) or None.
+
+    Written with 3 x 3 matrix products instead of per-component arrays: for one point the
+    number of numpy calls, not the arithmetic, sets the latency. The same model and stopping
+    rule as `solve_core`; the batch tests check that the two agree.
+    """
+    centre = origins.mean(axis=0)
+    o = origins - centre
+    d = directions_unit
+    eye = np.eye(3)
+    do = np.einsum("ij,ij->i", d, o)
+
+    def solve(w):
+        wd = d if w is None else d * w[:, None]
+        wo = o if w is None else o * w[:, None]
+        wsum = d.shape[0] if w is None else w.sum()
+        nmat = wsum * eye - wd.T @ d
+        b = wo.sum(axis=0) - wd.T @ do
+        ninv = np.linalg.inv(nmat)
+        return ninv @ b, ninv
+
+    x, ninv = solve(None)
+    weights = sigma = None
+    iterations = 1
+    if ifov is not None:
+        for iterations in range(2, MAX_ITERATIONS + 2):  # noqa: B007
+            t = np.einsum("ij,ij->i", x - o, d)
+            t_safe = np.where(t > 0, t, np.abs(t) + 1e-9)
             sigma = sigma_px * ifov * t_safe
             weights = 1.0 / (sigma * sigma)
-            x_new, ninv, det = _solve(o, d, weights)
-            scale = np.maximum(np.abs(t_safe).mean(axis=1), 1e-9)
-            step = np.sqrt(np.einsum("mi,mi->m", x_new - x, x_new - x)) / scale
+            x_new, ninv = solve(weights)
+            step2 = float((x_new - x) @ (x_new - x))
+            scale = max(float(t_safe.mean()), 1e-9)
             x = x_new
-            if not np.any(step > CONVERGENCE):
+            if not step2 > (CONVERGENCE * scale) ** 2:
                 break
-    rel = x[:, None, :] - o
-    t = np.einsum("mki,mki->mk", rel, d)
-    offsets = rel - d * t[..., None]
-    r2 = np.einsum("mki,mki->mk", offsets, offsets)
-    res = np.sqrt(r2)
-    vtpv = r2.sum(axis=1) if weights is None else (weights * r2).sum(axis=1)
+    rel = x - o
+    t = np.einsum("ij,ij->i", rel, d)
+    r = rel - t[:, None] * d
+    r2 = np.einsum("ij,ij->i", r, r)
+    vtpv = r2.sum() if weights is None else (weights * r2).sum()
     return CoreSolution(
-        points=x + centre[:, 0, :],
-        normal_inverse=ninv,
-        offsets=offsets,
-        residuals_m=res,
-        ranges=t,
-        weights=weights,
-        sigma_m=sigma,
-        vtpv=vtpv,
-        det=det,
+        points=(x + centre)[None],
+        normal_inverse=ninv[None],
+        residuals_m=np.sqrt(r2)[None],
+        ranges=t[None],
+        weights=None if weights is None else weights[None],
+        sigma_m=None if sigma is None else sigma[None],
+        vtpv=np.array([vtpv]),
         iterations=iterations,
     )

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gsgeo.errors import GeometryError, InputError
-from gsgeo.solve.core import solve_core, unit_directions
+from gsgeo.solve.core import solve_core, solve_one, unit_directions
 from gsgeo.solve.outliers import snoop
 from gsgeo.solve.stats import chi2_sf
 
@@ -169,6 +169,24 @@ def intersection_angles(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return max_angle, max_isect
 
 
+_COS_PARALLEL = math.cos(math.radians(PARALLEL_LIMIT_DEG))
+
+
+def _min_abs_cos(d: np.ndarray) -> np.ndarray:
+    """Smallest |cos| over all pairs of rays of each point (M, N, 3) -> (M,).
+
+    The loop runs over the N (N - 1) / 2 ray pairs, each step vectorised over all points.
+    """
+    dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
+    n = d.shape[1]
+    best = np.full(d.shape[0], np.inf)
+    for i in range(n - 1):
+        for j in range(i + 1, n):
+            c = np.abs(dx[:, i] * dx[:, j] + dy[:, i] * dy[:, j] + dz[:, i] * dz[:, j])
+            np.minimum(best, c, out=best)
+    return best
+
+
 def intersect(
     origins,
     directions,
@@ -221,7 +239,7 @@ def intersect(
             f"{max_isect:.3g} degrees, below {PARALLEL_LIMIT_DEG} degrees; aim from "
             "viewpoints further apart"
         )
-    sol = solve_core(o[None], du[None], None if f is None else f[None], s_px)
+    sol = solve_one(o, du, f, s_px)
     ranges = sol.ranges[0]
     behind = ~(ranges > 0)
     if behind.any():
@@ -258,7 +276,7 @@ def intersect(
             )
         else:
             cov = ninv.copy()
-    eig = np.linalg.eigvalsh(np.linalg.inv(ninv))
+    eig = np.linalg.eigvalsh(ninv)  # the inverse has the same condition number
     condition = float(eig[-1] / eig[0]) if eig[0] > 0 else math.inf
     flags, ratios = snoop(o, du, weights, sigma_m)
     if flags.any():
@@ -361,8 +379,7 @@ def intersect_batch(
             raise InputError(f"point {first} has a ray with a zero-length direction")
         fc = None if f is None else f[sl]
         sol = solve_core(oc, du, fc, s_px)
-        _, max_isect = intersection_angles(du)
-        ok = (max_isect >= PARALLEL_LIMIT_DEG) & np.all(sol.ranges > 0, axis=1)
+        ok = (_min_abs_cos(du) <= _COS_PARALLEL) & np.all(sol.ranges > 0, axis=1)
         s0sq = sol.vtpv / dof
         if fc is None:
             scale = s0sq
