@@ -1,4 +1,9 @@
-"""`gsgeo solve SESSION.json`: intersect the rays of every point in a session."""
+"""`gsgeo solve SESSION.json`: intersect the rays of every point in a session.
+
+With a grid CRS (``--crs`` or the session's ``crs``) every point goes through
+gsgeo.crs.pipeline.measure_session and is printed as easting, northing, height with sigmas and
+the PROJ operation used; without one the points are printed in the rays' own frame.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,7 @@ import argparse
 import json
 import sys
 
+from gsgeo.crs.pipeline import MeasurementFailure, measure_session
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.session import Session, load_session, ray_arrays
 from gsgeo.solve import SCALE_95_1D, intersect
@@ -18,6 +24,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Intersect the rays of every point in a session JSON file by least squares.",
     )
     p.add_argument("session", help="session JSON file (DESIGN.md, 'Session JSON')")
+    p.add_argument("--crs", default=None,
+                   help="projected grid CRS for the output, e.g. EPSG:27700 (overrides the "
+                        "session's crs); a compound CRS such as EPSG:27700+5701 brings its heights")
+    vg = p.add_mutually_exclusive_group()
+    vg.add_argument("--vertical", default=None,
+                    help="vertical CRS for orthometric heights, e.g. EPSG:5701; needs its geoid "
+                         "grid in PROJ's data directory (never PROJ's silent H = h)")
+    vg.add_argument("--geoid", default=None, metavar="FILE.tif",
+                    help="geoid undulation raster (metres; GeoTIFF or .gtx): H = h - N")
+    p.add_argument("--source-crs", default=None,
+                   help="geocentric CRS the scene is georeferenced in (default the session's, "
+                        "EPSG:4978 WGS 84; e.g. EPSG:4936 ETRS89 for a pure conversion)")
     p.add_argument("--sigma-px", type=float, default=None,
                    help="a-priori aiming precision in pixels (overrides the session's sigma_px)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -66,6 +84,45 @@ def _table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _grid_table(results: list) -> tuple[str, list[str]]:
+    """Table of grid results and the (deduplicated) warnings to print."""
+    head = (f"{'id':<10} {'Easting':>13} {'Northing':>13} {'Height':>10} {'sE':>7} {'sN':>7} "
+            f"{'sH':>7} {'ell95':>7} {'sigma0':>7} {'N':>3} {'angle':>6}  flagged")
+    lines = [head, "-" * len(head)]
+    warnings: list[str] = []
+    first = None
+    for m in results:
+        if isinstance(m, MeasurementFailure):
+            lines.append(f"{m.point_id:<10} not solved: {m.error}")
+            continue
+        r = m.record()
+        first = first or r
+        flagged = ",".join(str(i + 1) for i, f in enumerate(m.outliers) if f) or "-"
+        excl = ",".join(str(i + 1) for i, x in enumerate(m.excluded) if x)
+        if excl:
+            flagged += f" (excluded {excl})"
+        lines.append(
+            f"{m.point_id:<10} {r['easting']:13.4f} {r['northing']:13.4f} {r['height']:10.4f} "
+            f"{r['sigma_e']:7.4f} {r['sigma_n']:7.4f} {r['sigma_h']:7.4f} "
+            f"{r['ellipse_major_95']:7.4f} {r['sigma0']:7.3f} {r['n_rays']:3d} "
+            f"{r['max_angle_deg']:6.1f}  {flagged}"
+        )
+        for w in m.warnings:
+            if w not in warnings:
+                warnings.append(w)
+    lines.append("")
+    if first is not None:
+        acc = first["operation_accuracy_m"]
+        acc_text = "unknown accuracy" if acc is None else (
+            "exact conversion" if acc == 0 else f"accuracy {acc:g} m")
+        lines.append(f"CRS {first['crs']}; heights {first['height_type']}: {first['vertical_datum']}")
+        lines.append(f"operation: {first['operation']} ({acc_text})")
+    lines.append("E, N, H in the CRS's units; sigmas 1-sigma in metres "
+                 f"(x {SCALE_95_1D:.2f} for 95 %); ell95 = semi-major axis of the 95 % "
+                 "horizontal ellipse; angle = largest angle between rays, degrees.")
+    return "\n".join(lines), warnings
+
+
 def run(args: argparse.Namespace) -> int:
     session = load_session(args.session)
     if args.sigma_px is not None:
@@ -74,6 +131,11 @@ def run(args: argparse.Namespace) -> int:
         session.sigma_px = args.sigma_px
     if not session.points:
         raise InputError(f"{args.session}: the session has no points")
+    crs = getattr(args, "crs", None) or session.crs
+    if crs:
+        return _run_grid(args, session, crs)
+    if getattr(args, "vertical", None) or getattr(args, "geoid", None):
+        raise InputError("--vertical / --geoid need a grid CRS: give --crs (e.g. EPSG:27700)")
     results = solve_session(session)
     if args.json:
         json.dump({"points": results}, sys.stdout, indent=2)
@@ -81,6 +143,25 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(_table(results))
     failed = [r["id"] for r in results if "error" in r]
+    if failed:
+        print(f"gsgeo solve: {len(failed)} point(s) could not be solved: {', '.join(failed)}",
+              file=sys.stderr)
+        return 2
+    return 0
+
+
+def _run_grid(args: argparse.Namespace, session: Session, crs: str) -> int:
+    results = measure_session(session, crs=crs, vertical=args.vertical, geoid=args.geoid,
+                              source_crs=args.source_crs, sigma_px=session.sigma_px)
+    table, warnings = _grid_table(results)
+    if args.json:
+        json.dump({"points": [m.to_dict() for m in results]}, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        print(table)
+    for w in warnings:
+        print(f"gsgeo solve: warning: {w}", file=sys.stderr)
+    failed = [m.point_id for m in results if isinstance(m, MeasurementFailure)]
     if failed:
         print(f"gsgeo solve: {len(failed)} point(s) could not be solved: {', '.join(failed)}",
               file=sys.stderr)

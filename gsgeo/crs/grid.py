@@ -394,10 +394,11 @@ def _area_warnings(warnings, g: GridCRS, t2, lon, lat, inside_op) -> None:
         lon_ok = (lon >= w) & (lon <= e) if w <= e else (lon >= w) | (lon <= e)
         out = ~(lon_ok & (lat >= s) & (lat <= n))
         if out.any():
+            who = "the point lies" if out.size == 1 else f"{int(out.sum())} of {out.size} points lie"
+            area = a.name if len(a.name) <= 60 else a.name[:57] + "..."
             warnings.append(
-                f"{int(out.sum())} point(s) lie outside the area of use of {g.id} "
-                f"({g.horizontal.name}: {a.name}, lon {w:g}..{e:g}, lat {s:g}..{n:g}); "
-                "distortion and datum errors may be large"
+                f"{who} outside the area of use of {g.id} ({g.horizontal.name}: {area}; "
+                f"lon {w:g}..{e:g}, lat {s:g}..{n:g}); distortion and datum errors may be large"
             )
     if not inside_op:
         warnings.append(
