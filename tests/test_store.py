@@ -1,0 +1,290 @@
+"""gsgeo.store on a real SQLite file: schema, transactions, solving, recomputation, crashes."""
+
+from __future__ import annotations
+
+import json
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pyproj
+import pytest
+from servertools import LONDON, REPO, ecef_of, london_rays, rays_at
+
+from gsgeo.errors import CRSError, GeometryError, InputError
+from gsgeo.store import (
+    DB_NAME,
+    CheckPointRecord,
+    ConflictError,
+    FeatureRecord,
+    NotFoundError,
+    PointRecord,
+    Project,
+    Projects,
+    StoreError,
+    open_store,
+)
+from gsgeo.store.migrations import SCHEMA_VERSION
+
+UTM30 = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:32630", always_xy=True)
+UTM31 = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:32631", always_xy=True)
+
+
+@pytest.fixture
+def store(tmp_path):
+    s = open_store(tmp_path)
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def svc(store, tmp_path):
+    return Projects(store, tmp_path)
+
+
+def test_new_store_is_wal_with_current_schema(tmp_path, store):
+    assert (tmp_path / DB_NAME).is_file()
+    assert store.schema_version == SCHEMA_VERSION
+    con = sqlite3.connect(tmp_path / DB_NAME)
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    assert {"projects", "points", "features", "check_points"} <= tables
+    con.close()
+    assert store.check_integrity() == []
+
+
+def test_newer_schema_is_refused(tmp_path):
+    s = open_store(tmp_path)
+    s.close()
+    con = sqlite3.connect(tmp_path / DB_NAME)
+    con.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
+    con.commit()
+    con.close()
+    with pytest.raises(StoreError, match="newer"):
+        open_store(tmp_path)
+
+
+def test_not_a_database_is_a_clear_error(tmp_path):
+    (tmp_path / DB_NAME).write_bytes(b"this is not sqlite" * 100)
+    with pytest.raises(StoreError, match="cannot open"):
+        open_store(tmp_path)
+
+
+def test_records_round_trip_across_restart(tmp_path):
+    rays = london_rays(3)
+    s = open_store(tmp_path)
+    with s.transaction() as tx:
+        tx.insert_project(Project(id="p1", name="One", crs="EPSG:32630", sigma_px=0.7))
+        tx.insert_point(PointRecord(project_id="p1", id="A", rays=rays, code="c", excluded=[2],
+                                    result={"x": 1.5}, record={"easting": 1.0}, solved_rev=0))
+        tx.insert_point(PointRecord(project_id="p1", id="B", rays=rays, error="bad", solved_rev=0))
+        tx.insert_feature(FeatureRecord(project_id="p1", kind="line", id="L1", point_ids=["A", "B"]))
+        tx.upsert_check_points([CheckPointRecord(project_id="p1", id="A", x=1, y=2, z=None,
+                                                 crs="EPSG:27700")])
+    s.close()
+    s = open_store(tmp_path)
+    with s.transaction(write=False) as tx:
+        p = tx.get_project("p1")
+        pts = tx.list_points("p1")
+        lines = tx.list_features("p1", "line")
+        cps = tx.list_check_points("p1")
+    s.close()
+    assert (p.name, p.crs, p.sigma_px) == ("One", "EPSG:32630", 0.7)
+    assert [q.id for q in pts] == ["A", "B"] and [q.seq for q in pts] == [1, 2]
+    assert pts[0].rays == rays and pts[0].excluded == [2] and pts[0].result == {"x": 1.5}
+    assert pts[1].result is None and pts[1].error == "bad"
+    assert lines[0].point_ids == ["A", "B"]
+    assert (cps[0].x, cps[0].y, cps[0].z, cps[0].crs) == (1, 2, None, "EPSG:27700")
+
+
+def test_failed_transaction_leaves_nothing(store):
+    with pytest.raises(RuntimeError), store.transaction() as tx:
+        tx.insert_project(Project(id="p1", name="One"))
+        tx.insert_point(PointRecord(project_id="p1", id="A", rays=london_rays(2), error="x"))
+        raise RuntimeError("crash in the middle")
+    with store.transaction(write=False) as tx:
+        assert tx.list_projects() == []
+        assert tx.list_points("p1") == []
+
+
+def test_schema_refuses_half_points(store):
+    """The table itself rejects a point with rays but neither a result nor an error."""
+    with store.transaction() as tx:
+        tx.insert_project(Project(id="p1", name="One"))
+    with pytest.raises(sqlite3.IntegrityError), store.transaction() as tx:
+        tx.insert_point(PointRecord(project_id="p1", id="A", rays=london_rays(2)))
+    with pytest.raises(sqlite3.IntegrityError), store.transaction() as tx:
+        tx.insert_point(PointRecord(project_id="p1", id="A", rays=london_rays(2)[:1], error="x"))
+
+
+def test_point_is_solved_in_the_project_grid(svc):
+    p = svc.create_project(name="London", crs="EPSG:32630")
+    pt = svc.add_point(p.id, {"rays": london_rays(4), "code": "kerb"})
+    e, n = UTM30.transform(LONDON[0], LONDON[1])
+    rec = pt.record
+    assert pt.id == "P1" and rec["point_id"] == "P1" and rec["code"] == "kerb"
+    assert rec["crs"] == "EPSG:32630"
+    assert rec["easting"] == pytest.approx(e, abs=1e-4)
+    assert rec["northing"] == pytest.approx(n, abs=1e-4)
+    assert rec["height"] == pytest.approx(LONDON[2], abs=1e-4)
+    assert rec["n_rays"] == 4 and pt.solved_rev == p.settings_rev
+    assert svc.add_point(p.id, {"rays": london_rays(3)}).id == "P2"
+
+
+def test_changing_crs_resolves_every_point_from_rays(svc):
+    p = svc.create_project(name="London", crs="EPSG:32630")
+    targets = [(LONDON[0] + 0.001 * k, LONDON[1], 40.0 + k) for k in range(5)]
+    for k, t in enumerate(targets):
+        svc.add_point(p.id, {"id": f"T{k}", "rays": rays_at(ecef_of(*t), 3)})
+    p2 = svc.update_project(p.id, {"crs": "EPSG:32631"})
+    assert p2.settings_rev == p.settings_rev + 1
+    for k, t in enumerate(targets):
+        pt = svc.get_point(p.id, f"T{k}")
+        e, n = UTM31.transform(t[0], t[1])
+        assert pt.record["crs"] == "EPSG:32631" and pt.solved_rev == p2.settings_rev
+        assert pt.record["easting"] == pytest.approx(e, abs=1e-4)
+        assert pt.record["northing"] == pytest.approx(n, abs=1e-4)
+    # a bad CRS changes nothing
+    with pytest.raises(CRSError, match="crs"):
+        svc.update_project(p.id, {"crs": "EPSG:999999"})
+    assert svc.get_project(p.id).crs == "EPSG:32631"
+    assert svc.get_point(p.id, "T0").record["crs"] == "EPSG:32631"
+
+
+def test_sigma_px_change_rescales_the_angular_covariance(svc):
+    """Angular model: the covariance is a-priori, so it scales with sigma_px squared."""
+    p = svc.create_project(name="A", crs="EPSG:32630", sigma_px=1.0)
+    svc.add_point(p.id, {"id": "A", "rays": london_rays(5, ifov=1e-3)})
+    before = svc.get_point(p.id, "A").record["cov_ee"]
+    svc.update_project(p.id, {"sigma_px": 2.0})
+    after = svc.get_point(p.id, "A").record["cov_ee"]
+    assert after == pytest.approx(4.0 * before, rel=1e-9)
+
+
+def test_unsolvable_rays_are_refused_and_not_stored(svc):
+    p = svc.create_project(name="A", crs="EPSG:32630")
+    x = ecef_of(*LONDON)
+    parallel = [{"origin": (x + [0, 0, 10 * k]).tolist(), "direction": [1.0, 0.0, 0.0]}
+                for k in range(3)]
+    with pytest.raises(GeometryError):
+        svc.add_point(p.id, {"rays": parallel})
+    with pytest.raises(InputError, match=r"rays\[1\].direction"):
+        svc.add_point(p.id, {"rays": [london_rays(2)[0], {"origin": [0, 0, 0],
+                                                           "direction": [0, 0, 0]}]})
+    assert svc.list_points(p.id) == []
+
+
+def test_exclude_and_restore_a_ray(svc):
+    p = svc.create_project(name="A", crs="EPSG:32630")
+    rays = london_rays(4)
+    rays[2]["direction"] = (np.array(rays[2]["direction"]) + [0.02, 0, 0]).tolist()  # blunder
+    pt = svc.add_point(p.id, {"id": "A", "rays": rays})
+    e, _ = UTM30.transform(LONDON[0], LONDON[1])
+    e_blunder = pt.record["easting"]
+    off_before = abs(e_blunder - e)
+    pt = svc.update_point(p.id, "A", {"exclude_ray": 2})
+    assert pt.excluded == [2] and pt.record["n_rays"] == 3
+    assert abs(pt.record["easting"] - e) < 1e-4 < off_before
+    assert [r["excluded"] for r in pt.result["rays"]] == [False, False, True, False]
+    with pytest.raises(InputError, match="at least two rays"):
+        svc.update_point(p.id, "A", {"excluded": [0, 1, 2]})
+    assert svc.get_point(p.id, "A").excluded == [2]
+    with pytest.raises(InputError, match="out of range"):
+        svc.update_point(p.id, "A", {"exclude_ray": 7})
+    pt = svc.update_point(p.id, "A", {"restore_ray": 2})
+    assert pt.excluded == [] and pt.record["n_rays"] == 4
+    assert pt.record["easting"] == pytest.approx(e_blunder, abs=1e-9)
+
+
+def test_rename_carries_into_lines_and_delete_is_guarded(svc):
+    p = svc.create_project(name="A", crs="EPSG:32630")
+    for k in range(3):
+        svc.add_point(p.id, {"id": f"P{k}", "rays": rays_at(ecef_of(LONDON[0] + 1e-4 * k,
+                                                                      LONDON[1], 50), 3)})
+    svc.add_feature(p.id, "line", {"id": "L", "points": ["P0", "P1", "P2"]})
+    pt = svc.update_point(p.id, "P1", {"id": "Q1", "code": "wall"})
+    assert pt.record["point_id"] == "Q1" and pt.record["code"] == "wall"
+    f, _ = svc.get_feature(p.id, "line", "L")
+    assert f.point_ids == ["P0", "Q1", "P2"]
+    with pytest.raises(ConflictError, match="line 'L'"):
+        svc.delete_point(p.id, "Q1")
+    with pytest.raises(ConflictError, match="already exists"):
+        svc.update_point(p.id, "P0", {"id": "P2"})
+    svc.delete_feature(p.id, "line", "L")
+    svc.delete_point(p.id, "Q1")
+    with pytest.raises(NotFoundError):
+        svc.get_point(p.id, "Q1")
+
+
+def test_features_need_existing_points(svc):
+    p = svc.create_project(name="A", crs="EPSG:32630")
+    svc.add_point(p.id, {"id": "A", "rays": london_rays(3)})
+    with pytest.raises(InputError, match=r"points\[1\]: point 'B' does not exist"):
+        svc.add_feature(p.id, "line", {"points": ["A", "B"]})
+    with pytest.raises(InputError, match="at least 3 points"):
+        svc.add_feature(p.id, "polygon", {"points": ["A", "A"]})
+
+
+def test_deleting_a_project_deletes_everything_in_it(svc, store):
+    p = svc.create_project(name="A", crs="EPSG:32630")
+    svc.add_point(p.id, {"id": "A", "rays": london_rays(3)})
+    svc.delete_project(p.id)
+    with store.transaction(write=False) as tx:
+        assert tx.list_points(p.id) == []
+    with pytest.raises(NotFoundError):
+        svc.delete_project(p.id)
+
+
+WRITER = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {tests!r})
+    from servertools import ecef_of, rays_at, LONDON
+    from gsgeo.store import Projects, open_store
+    svc = Projects(open_store({data!r}))
+    pid = svc.create_project(name="crash", id="crash", crs="EPSG:32630").id
+    crs = ["EPSG:32630", "EPSG:32631"]
+    i = 0
+    while True:
+        svc.add_point(pid, {{"id": f"P{{i}}", "rays": rays_at(ecef_of(LONDON[0] + 1e-5 * i,
+                                                               LONDON[1], 50), 3)}})
+        print(i, flush=True)
+        if i % 7 == 6:  # a big transaction: every point re-solved
+            svc.update_project(pid, {{"crs": crs[(i // 7) % 2]}})
+        i += 1
+""")
+
+
+def test_kill_9_in_the_middle_of_writes_leaves_a_consistent_store(tmp_path):
+    data = tmp_path / "data"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", WRITER.format(tests=str(REPO / "tests"), data=str(data))],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    acknowledged = -1
+    t0 = time.monotonic()
+    while acknowledged < 40 and time.monotonic() - t0 < 120:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        acknowledged = int(line)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert acknowledged >= 40, proc.stderr.read()
+    s = open_store(data)
+    try:
+        assert s.check_integrity() == []
+        with s.transaction(write=False) as tx:
+            p = tx.get_project("crash")
+            pts = tx.list_points("crash")
+    finally:
+        s.close()
+    ids = {q.id for q in pts}
+    assert {f"P{i}" for i in range(acknowledged + 1)} <= ids  # nothing acknowledged is lost
+    for q in pts:  # no half-written point, no point left with other settings than its project
+        assert len(q.rays) == 3 and q.error is None
+        assert q.solved_rev == p.settings_rev
+        assert q.record["crs"] == p.crs and q.record["n_rays"] == 3
+        assert json.loads(json.dumps(q.result))["point_id"] == q.id
