@@ -12,6 +12,7 @@ from gsgeo.errors import GsgeoError
 #: Subcommand name -> module in gsgeo.commands providing ``add_parser(sub)`` and ``run(args)``.
 COMMANDS = {
     "solve": "gsgeo.commands.solve",
+    "tiles": "gsgeo.commands.tiles",
     "crs": "gsgeo.commands.crs",
     "serve": "gsgeo.commands.serve",
 }

@@ -1,0 +1,129 @@
+"""`gsgeo tiles INPUT -o OUTDIR`: 3DGS PLY/SPZ to georeferenced 3D Tiles of SPZ splats."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from gsgeo.errors import InputError
+
+
+def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"{what} expects {n} comma-separated numbers, got {text!r}") from None
+    if len(vals) != n or not all(v == v and abs(v) != float("inf") for v in vals):
+        raise InputError(f"{what} expects {n} comma-separated finite numbers, got {text!r}")
+    return vals
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "tiles",
+        help="convert a 3DGS PLY/SPZ scene into georeferenced 3D Tiles",
+        description="Convert a 3D Gaussian Splatting scene (INRIA PLY or SPZ) into OGC 3D Tiles "
+                    "1.1 whose glTF tiles hold SPZ-compressed splats (KHR_gaussian_splatting), "
+                    "placed on the Earth by one of --origin, --crs/--offset or --transform.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="Without a georeference the scene is put at lat 0, lon 0, h 0 with a warning.\n"
+               "Parents hold the most prominent splats of their subtree (refine ADD); all tiles "
+               "together hold every input splat.")
+    p.add_argument("input", help="INPUT.ply (INRIA 3DGS, SH degree 0-3) or INPUT.spz (v2/v3)")
+    p.add_argument("-o", "--output", required=True, metavar="OUTDIR",
+                   help="output directory (tileset.json + tiles/*.glb)")
+    g = p.add_argument_group("georeference (choose one)")
+    g.add_argument("--origin", metavar="LAT,LON,H",
+                   help="the input is a local ENU frame at this point (degrees, metres)")
+    g.add_argument("--heading", type=float, default=0.0, metavar="DEG",
+                   help="with --origin: azimuth of the input +y axis, degrees clockwise from "
+                        "true north (default 0)")
+    g.add_argument("--crs", metavar="CRS",
+                   help="the input is projected-CRS coordinates minus --offset (e.g. EPSG:32617)")
+    g.add_argument("--offset", metavar="E,N,H", default=None,
+                   help="with --crs: offset added to the input coordinates (metres)")
+    h = g.add_mutually_exclusive_group()
+    h.add_argument("--height", choices=["ellipsoidal"], default=None,
+                   help="with --crs: heights are ellipsoidal (the default for a 2-D CRS)")
+    h.add_argument("--vertical", metavar="CRS",
+                   help="with --crs: heights are in this vertical CRS (e.g. EPSG:5703); "
+                        "its geoid grid must be installed")
+    h.add_argument("--geoid", metavar="FILE.tif",
+                   help="with --crs: heights are orthometric; this geoid grid gives N (h = H + N)")
+    g.add_argument("--transform", metavar="M.json",
+                   help="a 4x4 local-to-ECEF matrix (16 numbers column-major, or 4 rows)")
+    p.add_argument("--axes", choices=["z-up", "y-up", "y-down"], default="z-up",
+                   help="axis convention of the input, turned to Z-up before georeferencing: "
+                        "z-up (ENU, default), y-up (glTF/three.js, SPZ's RUB), "
+                        "y-down (COLMAP/OpenCV)")
+    p.add_argument("--max-splats", type=int, default=131_072,
+                   help="splats per tile at most (default 131072)")
+    p.add_argument("--spz-version", type=int, choices=[2, 3], default=3,
+                   help="SPZ gzip file version (default 3)")
+    p.add_argument("--level", type=int, default=1, choices=range(10), metavar="0-9",
+                   help="gzip level of the SPZ payloads (default 1: fast; 9: ~10%% smaller, "
+                        "many times slower)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="threads compressing tiles (default: number of CPUs)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace OUTDIR if it exists (it is swapped only once complete)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(run=run)
+
+
+def georeference_from_args(args: argparse.Namespace):
+    from gsgeo.tiles.georef import Georeference, load_matrix
+
+    chosen = [n for n, v in (("--origin", args.origin), ("--crs", args.crs),
+                             ("--transform", args.transform)) if v]
+    if len(chosen) > 1:
+        raise InputError(f"choose one georeference: {' and '.join(chosen)} were both given")
+    if args.heading and not args.origin:
+        raise InputError("--heading needs --origin")
+    if (args.offset or args.vertical or args.geoid or args.height) and not args.crs:
+        raise InputError("--offset, --height, --vertical and --geoid need --crs")
+    if args.origin:
+        return Georeference("origin", origin=_floats(args.origin, 3, "--origin"),
+                            heading=args.heading, axes=args.axes)
+    if args.crs:
+        if args.offset is None:
+            raise InputError("--crs needs --offset E,N,H (use 0,0,0 when the PLY holds full "
+                             "grid coordinates)")
+        height = "vertical" if args.vertical else "geoid" if args.geoid else "ellipsoidal"
+        g = Georeference("crs", crs=args.crs, offset=_floats(args.offset, 3, "--offset"),
+                         height=height, vertical_crs=args.vertical, geoid=args.geoid,
+                         axes=args.axes)
+        if height == "ellipsoidal" and not args.height and "compound" not in g.describe():
+            import pyproj
+            if not pyproj.CRS.from_user_input(args.crs).is_compound:
+                g.warnings.append("heights taken as ellipsoidal (no --vertical or --geoid "
+                                  "given); pass --height ellipsoidal to silence this")
+        return g
+    if args.transform:
+        return Georeference("transform", matrix=load_matrix(args.transform), axes=args.axes)
+    return Georeference("none", axes=args.axes)
+
+
+def run(args: argparse.Namespace) -> int:
+    from gsgeo.tiles.build import build_tileset
+
+    if args.workers is not None and args.workers < 1:
+        raise InputError("--workers must be at least 1")
+    georef = georeference_from_args(args)
+    for w in georef.warnings:
+        print(f"gsgeo tiles: warning: {w}", file=sys.stderr)
+    georef.warnings.clear()
+    summary = build_tileset(args.input, args.output, georef, max_splats=args.max_splats,
+                            spz_version=args.spz_version, level=args.level,
+                            workers=args.workers, overwrite=args.overwrite,
+                            progress=None if args.quiet else sys.stderr)
+    for w in summary.warnings:
+        print(f"gsgeo tiles: warning: {w}", file=sys.stderr)
+    if args.json:
+        json.dump(summary.to_dict(), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        print(summary.text())
+    return 0

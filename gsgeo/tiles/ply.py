@@ -1,0 +1,274 @@
+"""3DGS PLY reading (streamed in blocks) and writing.
+
+Accepted layouts of the ``vertex`` element (binary little/big endian or ASCII, any numeric
+property types):
+
+- INRIA 3DGS (gsplat, nerfstudio, Postshot, the Inria code, ...): ``x y z [nx ny nz]
+  f_dc_0..2 [f_rest_0..K-1] opacity scale_0..2 rot_0..3`` with K = 0, 9, 24 or 45 (SH degree
+  0-3). f_rest is channel-major, opacity a logit, scales natural logs, rot w-first.
+- The same with 8-bit ``red green blue`` instead of ``f_dc_*`` (some exporters write colours
+  that way): f_dc = (c / 255 - 0.5) / C0.
+
+Extra properties are ignored. Anything else is rejected naming the missing properties.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gsgeo.errors import InputError
+from gsgeo.tiles.splats import SH_C0, SH_DEGREE_OF, Splats
+
+_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_REQUIRED = ["x", "y", "z", "opacity", "scale_0", "scale_1", "scale_2",
+             "rot_0", "rot_1", "rot_2", "rot_3"]
+
+
+@dataclass
+class PlyLayout:
+    path: Path
+    fmt: str                 # binary_little_endian | binary_big_endian | ascii
+    count: int
+    dtype: np.dtype          # one vertex record
+    data_offset: int         # byte offset of the vertex element
+    sh_degree: int
+    color_mode: str          # "f_dc" or "rgb"
+    n_rest: int
+
+    @property
+    def size_bytes(self) -> int:
+        return os.path.getsize(self.path)
+
+
+def read_layout(path: str | os.PathLike) -> PlyLayout:
+    """Parse the header of a 3DGS PLY and check its vertex properties."""
+    path = Path(path)
+    try:
+        f = open(path, "rb")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot open ({exc.strerror})") from None
+    with f:
+        if f.readline().strip() != b"ply":
+            raise InputError(f"{path}: not a PLY file (no 'ply' magic line)")
+        fmt = None
+        elements: list[tuple[str, int, list[tuple[str, str]]]] = []
+        while True:
+            line = f.readline()
+            if not line:
+                raise InputError(f"{path}: PLY header has no end_header")
+            words = line.decode("ascii", "replace").split()
+            if not words or words[0] in ("comment", "obj_info"):
+                continue
+            if words[0] == "end_header":
+                break
+            if words[0] == "format":
+                fmt = words[1]
+            elif words[0] == "element":
+                elements.append((words[1], int(words[2]), []))
+            elif words[0] == "property":
+                if not elements:
+                    raise InputError(f"{path}: PLY property before any element")
+                if words[1] == "list":
+                    elements[-1][2].append((words[-1], "list"))
+                else:
+                    if words[1] not in _TYPES:
+                        raise InputError(f"{path}: unknown PLY property type {words[1]!r}")
+                    elements[-1][2].append((words[2], words[1]))
+        header_end = f.tell()
+    if fmt not in ("binary_little_endian", "binary_big_endian", "ascii"):
+        raise InputError(f"{path}: unsupported PLY format {fmt!r}")
+    offset = header_end
+    vertex = None
+    for name, count, props in elements:
+        if name == "vertex":
+            vertex = (count, props)
+            break
+        if any(t == "list" for _, t in props):
+            raise InputError(f"{path}: list properties before the vertex element are not supported")
+        if fmt != "ascii":
+            offset += count * sum(np.dtype(_TYPES[t]).itemsize for _, t in props)
+    if vertex is None:
+        raise InputError(f"{path}: PLY has no 'vertex' element")
+    count, props = vertex
+    names = [n for n, _ in props]
+    if any(t == "list" for _, t in props):
+        raise InputError(f"{path}: the vertex element has list properties; not a 3DGS PLY")
+    if "chunk" in [e[0] for e in elements] or "packed_position" in names:
+        raise InputError(f"{path}: compressed (SuperSplat/PlayCanvas) PLY is not supported; "
+                         "decompress it to a standard 3DGS PLY first")
+    has_dc = all(f"f_dc_{i}" in names for i in range(3))
+    has_rgb = all(c in names for c in ("red", "green", "blue"))
+    missing = [n for n in _REQUIRED if n not in names]
+    if not (has_dc or has_rgb):
+        missing += ["f_dc_0", "f_dc_1", "f_dc_2"]
+    if missing:
+        raise InputError(f"{path}: not a 3DGS PLY; the vertex element lacks "
+                         f"{', '.join(missing)}")
+    n_rest = sum(1 for n in names if n.startswith("f_rest_"))
+    if n_rest % 3 or n_rest // 3 not in SH_DEGREE_OF:
+        raise InputError(f"{path}: {n_rest} f_rest_* properties; expected 0, 9, 24 or 45")
+    missing_rest = [f"f_rest_{i}" for i in range(n_rest) if f"f_rest_{i}" not in names]
+    if missing_rest:
+        raise InputError(f"{path}: f_rest properties are not numbered 0..{n_rest - 1} "
+                         f"(missing {', '.join(missing_rest[:3])})")
+    order = "<" if fmt == "binary_little_endian" else ">"
+    dtype = np.dtype([(n, order + _TYPES[t]) for n, t in props])
+    if fmt != "ascii":
+        need = offset + count * dtype.itemsize
+        if os.path.getsize(path) < need:
+            raise InputError(f"{path}: file is truncated ({os.path.getsize(path)} bytes, the "
+                             f"header announces {count} vertices needing {need})")
+    return PlyLayout(path, fmt, count, dtype, offset, SH_DEGREE_OF[n_rest // 3],
+                     "f_dc" if has_dc else "rgb", n_rest)
+
+
+def _records_to_splats(rec: np.ndarray, layout: PlyLayout) -> Splats:
+    n = rec.shape[0]
+    names = list(rec.dtype.names)
+    uniform = len(set(rec.dtype[i] for i in range(len(names)))) == 1 and \
+        rec.dtype[0].kind == "f"
+    if uniform:
+        # the usual all-float32 layout: one 2-D view, columns gathered in one go each
+        mat = rec.view(rec.dtype[0]).reshape(n, len(names))
+
+        def cols(sel: list[str], dt=np.float32) -> np.ndarray:
+            ix = [names.index(s) for s in sel]
+            if ix == list(range(ix[0], ix[0] + len(ix))):
+                return mat[:, ix[0]:ix[0] + len(ix)].astype(dt)
+            return mat[:, ix].astype(dt)
+    else:
+        def cols(sel: list[str], dt=np.float32) -> np.ndarray:
+            out = np.empty((n, len(sel)), dt)
+            for i, name in enumerate(sel):
+                out[:, i] = rec[name]
+            return out
+
+    positions = cols(["x", "y", "z"], np.float64)
+    scales = cols(["scale_0", "scale_1", "scale_2"])
+    rotations = cols(["rot_1", "rot_2", "rot_3", "rot_0"])  # PLY is w-first; ours x, y, z, w
+    opacities = cols(["opacity"])[:, 0]
+    if layout.color_mode == "f_dc":
+        colors = cols(["f_dc_0", "f_dc_1", "f_dc_2"])
+    else:
+        colors = (cols(["red", "green", "blue"]) / 255.0 - 0.5) / SH_C0
+    k = layout.n_rest // 3
+    if k:
+        # channel-major in the file (all R, all G, all B) -> (N, K, 3) as a transposed view
+        sh = cols([f"f_rest_{i}" for i in range(layout.n_rest)]).reshape(n, 3, k)
+        sh = sh.transpose(0, 2, 1)
+    else:
+        sh = np.zeros((n, 0, 3), np.float32)
+    return Splats(positions, scales, rotations, opacities, colors, sh)
+
+
+def iter_records(layout: PlyLayout, block: int = 262_144) -> Iterator[np.ndarray]:
+    """Vertex records in blocks (structured arrays); memory is bounded by the block size."""
+    if layout.fmt == "ascii":
+        from plyfile import PlyData  # ASCII is rare for 3DGS; read it whole
+        data = PlyData.read(str(layout.path))["vertex"].data
+        for i in range(0, len(data), block):
+            yield data[i:i + block]
+        return
+    size = layout.dtype.itemsize
+    with open(layout.path, "rb") as f:
+        f.seek(layout.data_offset)
+        buf = bytearray(block * size)
+        left = layout.count
+        while left > 0:
+            m = min(block, left)
+            view = memoryview(buf)[: m * size]
+            got = f.readinto(view)
+            if got != m * size:
+                raise InputError(f"{layout.path}: file ended inside the vertex data")
+            yield np.frombuffer(buf, layout.dtype, count=m)
+            left -= m
+
+
+def iter_ply(layout: PlyLayout, block: int = 262_144) -> Iterator[Splats]:
+    """Splats of a PLY in blocks, as stored (frame of the file)."""
+    for rec in iter_records(layout, block):
+        yield _records_to_splats(rec, layout)
+
+
+def ply_bounds(layout: PlyLayout, block: int = 1_048_576) -> tuple[np.ndarray, np.ndarray, int]:
+    """Min and max of the finite x, y, z (float64) and the number of finite centres."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    n = 0
+    if layout.fmt != "ascii":
+        # a read-only map: only the pages holding x, y, z are touched, block by block
+        mm = np.memmap(layout.path, layout.dtype, "r", layout.data_offset, (layout.count,))
+        chunks = (mm[i:i + block] for i in range(0, layout.count, block))
+    else:
+        mm, chunks = None, iter_records(layout, block)
+    for rec in chunks:
+        p = np.empty((rec.shape[0], 3))
+        for i, c in enumerate("xyz"):
+            p[:, i] = rec[c]
+        p = p[np.isfinite(p).all(axis=1)]
+        if p.size:
+            lo = np.minimum(lo, p.min(axis=0))
+            hi = np.maximum(hi, p.max(axis=0))
+            n += p.shape[0]
+    del mm
+    return lo, hi, n
+
+
+def read_ply(path: str | os.PathLike) -> Splats:
+    """Read a whole 3DGS PLY into memory (for tests and small files)."""
+    layout = read_layout(path)
+    parts = list(iter_ply(layout))
+    if not parts:
+        return _records_to_splats(np.zeros(0, layout.dtype), layout)
+    return Splats.concatenate(parts)
+
+
+def write_ply(path: str | os.PathLike, s: Splats, *, normals: bool = True,
+              dtype: str = "<f4", block: int = 1_048_576) -> None:
+    """Write splats as an INRIA 3DGS PLY (binary little endian, float32 by default).
+
+    Positions are written in the given dtype: float32 PLY coordinates carry about 7
+    significant digits, so keep them local (small) or pass dtype='<f8'.
+    """
+    k = s.sh.shape[1]
+    names = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals else []) + \
+        [f"f_dc_{i}" for i in range(3)] + [f"f_rest_{i}" for i in range(3 * k)] + \
+        ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    tname = {"<f4": "float", "<f8": "double"}[dtype]
+    rec_dt = np.dtype([(n, dtype) for n in names])
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {s.count}"]
+    header += [f"property {tname} {n}" for n in names] + ["end_header"]
+    tmp = Path(str(path) + ".tmp")
+    with open(tmp, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        for i in range(0, s.count, block):
+            sl = slice(i, min(s.count, i + block))
+            m = sl.stop - sl.start
+            arr = np.empty((m, len(names)), dtype)
+            col = 0
+            arr[:, 0:3] = s.positions[sl]
+            col = 3
+            if normals:
+                arr[:, 3:6] = 0
+                col = 6
+            arr[:, col:col + 3] = s.colors[sl]
+            col += 3
+            if k:
+                arr[:, col:col + 3 * k] = s.sh[sl].transpose(0, 2, 1).reshape(m, 3 * k)
+                col += 3 * k
+            arr[:, col] = s.opacities[sl]
+            arr[:, col + 1:col + 4] = s.scales[sl]
+            q = s.rotations[sl]
+            arr[:, col + 4] = q[:, 3]
+            arr[:, col + 5:col + 8] = q[:, :3]
+            f.write(np.ascontiguousarray(arr).view(rec_dt).tobytes())
+    os.replace(tmp, path)
