@@ -21,6 +21,7 @@ from gsgeo.server import models as m
 from gsgeo.server.scenes import list_scenes
 from gsgeo.store import FeatureRecord, PointRecord, Project, Projects
 from gsgeo.store.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
+from gsgeo.store.projects import validate_settings
 from gsgeo.store.solving import check_excluded, json_ready, measure, session_point
 
 router = APIRouter(prefix="/api")
@@ -73,18 +74,24 @@ def intersect(body: m.IntersectRequest, request: Request) -> dict[str, Any]:
     rays = [r.model_dump(exclude_none=True) for r in body.rays]
     sp = session_point(body.id, rays, body.code, body.description)
     excluded = check_excluded(body.exclude, len(rays), "exclude")
-    settings = body.model_dump(include={"crs", "vertical", "geoid", "source_crs", "sigma_px"})
-    return json_ready(measure(sp, settings, excluded, request.app.state.config.data_dir).to_dict())
+    data_dir = request.app.state.config.data_dir
+    settings = validate_settings(
+        body.model_dump(include={"crs", "vertical", "geoid", "source_crs", "sigma_px"}), data_dir)
+    return json_ready(measure(sp, settings, excluded, data_dir).to_dict())
 
 
-@router.get("/crs", summary="Search coordinate reference systems by name or code")
-def crs_search(q: Annotated[str, Query(min_length=1, max_length=200)],
-               limit: Annotated[int, Query(ge=1, le=200)] = 20) -> dict[str, Any]:
-    from gsgeo.crs import search as crs_search_module
+@router.get("/crs", summary="Search coordinate reference systems by name, area or code")
+def crs_search(q: Annotated[str, Query(min_length=1, max_length=200,
+                                       description="words of the name or area, or a code")],
+               kind: Annotated[list[Literal["projected", "compound", "vertical", "geocentric"]],
+                               Query(description="kinds of CRS to search")] = ("projected", "compound"),
+               limit: Annotated[int, Query(ge=1, le=500)] = 50) -> dict[str, Any]:
+    from gsgeo.crs.discovery import search_crs
 
-    hits = crs_search_module.search_crs(q, limit=limit)
-    return {"query": q, "results": json_ready([h if isinstance(h, dict) else vars(h)
-                                               for h in hits])}
+    hits = search_crs(q, kinds=tuple(dict.fromkeys(kind or ["projected", "compound"])))
+    return {"query": q, "total": len(hits),
+            "results": [{"code": h.code, "name": h.name, "kind": h.kind, "area": h.area}
+                        for h in hits[:limit]]}
 
 
 @router.get("/scenes", summary="Scenes in DATA/scenes with their georeference")

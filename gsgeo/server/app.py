@@ -65,7 +65,9 @@ def _field_of(message: str) -> str | None:
 
 
 def _loc(loc: tuple | list) -> str:
-    parts = [p for p in loc if p not in ("body", "query", "path", "form", "header")] or list(loc)
+    parts = list(loc[1:]) if loc and loc[0] in ("body", "query", "path", "header") else list(loc)
+    if not parts:
+        return str(loc[0]) if loc else ""
     out = ""
     for p in parts:
         out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
@@ -82,6 +84,12 @@ def _install_error_handlers(app: FastAPI) -> None:
     async def validation(_req: Request, exc: RequestValidationError) -> JSONResponse:
         errs = exc.errors()
         msgs = []
+        for e in errs:
+            if e.get("type") == "json_invalid":
+                pos = e.get("loc", ("body", "?"))[-1]
+                err = (e.get("ctx") or {}).get("error", "")
+                e["loc"] = ("body",)
+                e["msg"] = f"not valid JSON at character {pos}" + (f": {err}" if err else "")
         for e in errs[:5]:
             where = _loc(e.get("loc", ()))
             msgs.append(f"{where}: {e.get('msg', 'invalid')}" if where else e.get("msg", "invalid"))

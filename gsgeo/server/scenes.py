@@ -8,8 +8,6 @@ sphere) as a longitude/latitude/height box.
 
 from __future__ import annotations
 
-import json
-import math
 import threading
 from pathlib import Path
 from typing import Any
@@ -22,49 +20,19 @@ _cache: dict[Path, tuple[tuple[int, int], dict[str, Any]]] = {}
 _cache_lock = threading.Lock()
 
 
-def _matrix(values: Any) -> np.ndarray | None:
-    if not isinstance(values, list) or len(values) != 16:
-        return None
+def _bounds(ts) -> dict[str, float] | None:
+    """Longitude/latitude (degrees) and ellipsoidal height (m) box of the root bounding volume."""
+    from gsgeo.errors import GsgeoError
+
     try:
-        m = np.array(values, dtype=float).reshape(4, 4).T  # column-major -> row-major
-    except (TypeError, ValueError):
+        corners = ts.bounding_box_corners_ecef()
+    except (GsgeoError, TypeError, ValueError, KeyError, IndexError):
         return None
-    return m if np.all(np.isfinite(m)) else None
-
-
-def _geodetic(ecef: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    from gsgeo.crs.frames import ecef_to_geodetic
-
-    return ecef_to_geodetic(ecef, "EPSG:4978")
-
-
-def _bounds(volume: Any, m: np.ndarray) -> dict[str, float] | None:
-    if not isinstance(volume, dict):
+    if not np.all(np.isfinite(corners)):
         return None
-    try:
-        if "region" in volume:
-            w, s, e, n, lo, hi = (float(v) for v in volume["region"])
-            return {"west": math.degrees(w), "south": math.degrees(s), "east": math.degrees(e),
-                    "north": math.degrees(n), "min_height": lo, "max_height": hi}
-        if "box" in volume:
-            b = np.array(volume["box"], dtype=float)
-            c, axes = b[:3], b[3:].reshape(3, 3)
-            signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
-            local = c + signs @ axes
-        elif "sphere" in volume:
-            c = np.array(volume["sphere"][:3], dtype=float)
-            r = float(volume["sphere"][3])
-            local = c + r * np.vstack([np.eye(3), -np.eye(3)])
-        else:
-            return None
-    except (TypeError, ValueError, KeyError, IndexError):
-        return None
-    ecef = local @ m[:3, :3].T + m[:3, 3]
-    if not np.all(np.isfinite(ecef)):
-        return None
-    lon, lat, h = _geodetic(ecef)
-    return {"west": float(lon.min()), "south": float(lat.min()), "east": float(lon.max()),
-            "north": float(lat.max()), "min_height": float(h.min()), "max_height": float(h.max())}
+    b = ts.geodetic_bounds(corners)
+    return {"west": b["lon"][0], "south": b["lat"][0], "east": b["lon"][1],
+            "north": b["lat"][1], "min_height": b["h"][0], "max_height": b["h"][1]}
 
 
 def _splat_count(scene_dir: Path) -> int | None:
@@ -95,20 +63,21 @@ def scene_info(scene_dir: Path) -> dict[str, Any]:
                             "url": f"/scenes/{scene_dir.name}/tileset.json",
                             "origin": None, "bounds": None, "splat_count": None,
                             "transform": None, "error": None}
+    from gsgeo.crs.frames import ecef_to_geodetic
+    from gsgeo.crs.tileset import Tileset
+    from gsgeo.errors import GsgeoError
+
     try:
-        doc = json.loads(ts.read_text(encoding="utf-8"))
-        root = doc["root"]
-        m = _matrix(root.get("transform")) if "transform" in root else np.eye(4)
-        if m is None:
-            raise ValueError("root.transform is not 16 finite numbers")
-        info["transform"] = m.T.reshape(-1).tolist()
+        tileset = Tileset(ts)
+        m = tileset.root_transform
+        info["transform"] = m.T.reshape(-1).tolist()  # column-major, as in tileset.json
         t = m[:3, 3]
         if np.linalg.norm(t) > 1e6:  # a geocentric translation: the scene is georeferenced
-            lon, lat, h = _geodetic(t)
+            lon, lat, h = ecef_to_geodetic(t)
             info["origin"] = {"lon": float(lon), "lat": float(lat), "height": float(h)}
-        info["bounds"] = _bounds(root.get("boundingVolume"), m)
+        info["bounds"] = _bounds(tileset)
         info["splat_count"] = _splat_count(scene_dir)
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (GsgeoError, OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         info["error"] = f"tileset.json cannot be read: {exc}"
     with _cache_lock:
         _cache[ts] = (key, info)

@@ -231,7 +231,7 @@ class Projects:
             raise InputError(f"{where}: a point needs at least two rays, got {len(rays)}")
         if len(rays) > MAX_RAYS:
             raise InputError(f"{where}: more than {MAX_RAYS} rays")
-        sp = session_point("x", rays)  # validates each ray, errors name point.rays[i]...
+        sp = session_point("x", rays)  # validates each ray, errors name rays[i]...
         return [r.to_dict() for r in sp.rays]
 
     def add_point(self, pid: str, doc: dict[str, Any]) -> PointRecord:
@@ -239,10 +239,7 @@ class Projects:
 
         A point whose rays cannot be intersected is refused (GeometryError) and not stored.
         """
-        try:
-            rays = self._rays(doc.get("rays"))
-        except InputError as exc:
-            raise InputError(str(exc).replace("x.rays", "rays", 1)) from None
+        rays = self._rays(doc.get("rays"))
         code = _text(doc.get("code"), "code", 200)
         description = _text(doc.get("description"), "description")
         excluded = check_excluded(list(doc.get("excluded") or []), len(rays))

@@ -23,11 +23,14 @@ def json_ready(value: Any) -> Any:
     return value
 
 
-def session_point(point_id: str, rays: list[dict], code: str = "", description: str = "",
-                  where: str = "") -> SessionPoint:
-    """Validate rays (session-JSON dicts) into a SessionPoint; errors name ``where``rays[i]."""
-    return parse_point({"id": point_id, "code": code, "description": description, "rays": rays},
-                       where.rstrip(".") or "point")
+def session_point(point_id: str, rays: list[dict], code: str = "", description: str = "") -> SessionPoint:
+    """Validate rays (session-JSON dicts) into a SessionPoint; errors name ``rays[i].field``."""
+    try:
+        return parse_point({"id": point_id, "code": code, "description": description,
+                            "rays": rays}, "point")
+    except InputError as exc:
+        msg = str(exc)
+        raise InputError(msg[len("point."):] if msg.startswith("point.") else msg) from None
 
 
 def check_excluded(excluded: list[int], n_rays: int, where: str = "excluded") -> list[int]:
