@@ -499,3 +499,40 @@ def test_request_size_limits(tmp_path):
         r = c.post("/api/projects", content=chunks(), headers={"content-type": "application/json"})
         assert r.status_code == 413
         assert c.get("/api/projects").json()["projects"] == []
+
+
+def test_feature_measures_follow_their_points(client, project):
+    """Lengths and areas against the targets projected by pyproj, recomputed when points move."""
+    corners = [(0, 0), (20, 0), (20, 10), (0, 10)]  # metres east, north of a base point
+    e0, n0 = UTM30.transform(*LONDON[:2])
+    inv = pyproj.Transformer.from_crs("EPSG:32630", "EPSG:4979", always_xy=True)
+    grid = []
+    for k, (de, dn) in enumerate(corners):
+        lon, lat = inv.transform(e0 + de, n0 + dn)
+        h = 40.0 + k
+        grid.append((e0 + de, n0 + dn, h))
+        r = client.post(f"/api/projects/{project}/points",
+                        json={"id": f"C{k}", "rays": rays_at(ecef_of(lon, lat, h), 4,
+                                                              noise_rad=2e-5,
+                                                              rng=np.random.default_rng(k))})
+        assert r.status_code == 201
+    g = np.array(grid)
+    line = client.post(f"/api/projects/{project}/lines",
+                       json={"points": ["C0", "C1", "C2"]}).json()["measures"]
+    assert line["length_2d"] == pytest.approx(30.0, abs=0.01)
+    want_3d = np.linalg.norm(g[1] - g[0]) + np.linalg.norm(g[2] - g[1])
+    assert line["length_3d"] == pytest.approx(want_3d, abs=0.01)
+    assert 0 < line["sigma_length_2d"] < 0.01
+    poly = client.post(f"/api/projects/{project}/polygons",
+                       json={"points": ["C0", "C1", "C2", "C3"]}).json()["measures"]
+    assert poly["area_2d"] == pytest.approx(200.0, abs=0.2)
+    assert poly["perimeter_2d"] == pytest.approx(60.0, abs=0.02)
+    assert poly["sigma_area_2d"] > 0
+    # move C2 ten metres north: the stored line is recomputed on read
+    lon, lat = inv.transform(e0 + 20, n0 + 20)
+    client.patch(f"/api/projects/{project}/points/C2",
+                 json={"rays": rays_at(ecef_of(lon, lat, 42.0), 4)})
+    line = client.get(f"/api/projects/{project}/lines/L1").json()["measures"]
+    assert line["length_2d"] == pytest.approx(40.0, abs=0.01)
+    assert client.get(f"/api/projects/{project}/polygons/A1").json()["measures"]["area_2d"] == \
+        pytest.approx(300.0, abs=0.2)

@@ -355,16 +355,17 @@ class Projects:
 
     def list_features(self, pid: str, kind: str) -> list[tuple[FeatureRecord, dict[str, Any]]]:
         with self.store.transaction(write=False) as tx:
-            self._project(tx, pid)
+            p = self._project(tx, pid)
             feats = tx.list_features(pid, kind)
             pts = {q.id: q for q in tx.list_points(pid)}
-        return [(f, feature_measures(f, pts)) for f in feats]
+        return [(f, feature_measures(f, pts, p)) for f in feats]
 
     def get_feature(self, pid: str, kind: str, fid: str) -> tuple[FeatureRecord, dict[str, Any]]:
         with self.store.transaction(write=False) as tx:
             f = self._feature(tx, pid, kind, fid)
+            p = self._project(tx, pid)
             pts = {q.id: q for q in tx.list_points(pid)}
-        return f, feature_measures(f, pts)
+        return f, feature_measures(f, pts, p)
 
     def _feature(self, tx: Transaction, pid: str, kind: str, fid: str) -> FeatureRecord:
         self._project(tx, pid)
@@ -515,9 +516,14 @@ def check_points_in_grid(cps: list[CheckPointRecord], crs: str) -> np.ndarray:
     return out
 
 
-def feature_measures(f: FeatureRecord, points: dict[str, PointRecord]) -> dict[str, Any]:
-    """Lengths (line) or area and perimeter (polygon) with sigmas, from the points' grid
-    coordinates and covariances (gsgeo.export.features)."""
+def feature_measures(f: FeatureRecord, points: dict[str, PointRecord],
+                     project: Project) -> dict[str, Any]:
+    """Lengths (line) or area and perimeter (polygon) with 1-sigma values, in metres and m²,
+    from the points' grid coordinates and covariances (gsgeo.export.features); an ``error``
+    entry says why they cannot be computed."""
+    from gsgeo.crs.resolve import grid_crs
+    from gsgeo.export.features import line_measures, polygon_measures
+
     recs = []
     for q in f.point_ids:
         pt = points.get(q)
@@ -527,18 +533,16 @@ def feature_measures(f: FeatureRecord, points: dict[str, PointRecord]) -> dict[s
         recs.append(pt.record)
     xyz = np.array([[r["easting"], r["northing"],
                      math.nan if r.get("height") is None else r["height"]] for r in recs])
-    cov = np.array([[[r["cov_ee"], r["cov_en"], r["cov_eh"]],
-                     [r["cov_en"], r["cov_nn"], r["cov_nh"]],
-                     [r["cov_eh"], r["cov_nh"], r["cov_hh"]]] for r in recs], dtype=float)
+    keys = (("cov_ee", "cov_en", "cov_eh"), ("cov_en", "cov_nn", "cov_nh"),
+            ("cov_eh", "cov_nh", "cov_hh"))
+    cov = np.array([[[math.nan if r.get(k) is None else r[k] for k in row] for row in keys]
+                    for r in recs], dtype=float)
     try:
-        from gsgeo.export import features as geo
-    except ImportError:
-        return {"error": "lengths and areas are not available (gsgeo.export.features missing)"}
-    try:
-        if f.kind == "line":
-            m = geo.line_measures(xyz, cov)
-        else:
-            m = geo.polygon_measures(xyz, cov)
+        g = grid_crs(project.crs, project.vertical) if project.crs else None
+        units = {"unit_m": g.unit_factor if g else 1.0,
+                 "vertical_unit_m": g.vertical_unit_factor if g else 1.0}
+        fn = line_measures if f.kind == "line" else polygon_measures
+        m = fn(xyz, cov, f.point_ids, **units)
     except GsgeoError as exc:
         return {"error": str(exc)}
-    return json_ready(m if isinstance(m, dict) else vars(m))
+    return json_ready(vars(m))
