@@ -32,19 +32,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+def resolve_token(host: str, environ: dict | None = None) -> tuple[str | None, bool]:
+    """(token, generated): GSGEO_TOKEN when set; off loopback a fresh one; else none."""
+    from gsgeo.server.app import is_loopback
+
+    env = os.environ if environ is None else environ
+    token = (env.get("GSGEO_TOKEN") or "").strip() or None
+    if token is None and not is_loopback(host):
+        return secrets.token_urlsafe(24), True
+    return token, False
+
+
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from gsgeo.server.app import ServerConfig, create_app, is_loopback
+    from gsgeo.server.app import ServerConfig, create_app
 
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port must be between 0 and 65535, got {args.port}")
     data = Path(args.data)
     if data.exists() and not data.is_dir():
         raise InputError(f"--data {data}: is not a directory")
-    token = os.environ.get("GSGEO_TOKEN") or None
-    if token is None and not is_loopback(args.host):
-        token = secrets.token_urlsafe(24)
+    token, generated = resolve_token(args.host)
+    if generated:
         print(f"gsgeo serve: bound to {args.host}: API token {token}\n"
               f"  send it as 'Authorization: Bearer {token}' or open "
               f"http://{args.host}:{args.port}/#token={token}", file=sys.stderr, flush=True)
