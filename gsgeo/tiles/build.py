@@ -67,7 +67,8 @@ class Summary:
             f"lat {b['lat'][0]:.7f} .. {b['lat'][1]:.7f}, h {b['h'][0]:.2f} .. {b['h'][1]:.2f} m",
             f"SPZ            file version {self.spz_version}, {self.fractional_bits} fractional "
             f"bits ({1000 / 2 ** self.fractional_bits:.2f} mm steps)",
-            f"time           {self.seconds:.1f} s ({self.splats_written / max(self.seconds, 1e-9):,.0f} splats/s)",
+            f"time           {self.seconds:.1f} s "
+            f"({self.splats_written / max(self.seconds, 1e-9):,.0f} splats/s)",
         ]
         lines += [f"warning        {w}" for w in self.warnings]
         return "\n".join(lines)
@@ -94,6 +95,7 @@ class Progress:
 
     def close(self) -> None:
         if self.stream is not None:
+            self._last = 0.0
             self.update(0)
             self.stream.write("\n")
             self.stream.flush()

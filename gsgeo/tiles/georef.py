@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -304,8 +305,10 @@ class _GridPlacement(Placement):
                 self.vert = pyproj.Transformer.from_crs(comp, self.geog.to_3d(), always_xy=True,
                                                         allow_ballpark=False)
             except ProjError:
-                grp = pyproj.transformer.TransformerGroup(comp, self.geog.to_3d(),
-                                                          always_xy=True)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")   # the message below names the grid
+                    grp = pyproj.transformer.TransformerGroup(comp, self.geog.to_3d(),
+                                                              always_xy=True)
                 why = "; ".join(str(w) for w in grp.unavailable_operations[:1]) or \
                     "no transformation without a geoid grid"
                 raise DatumError(

@@ -32,8 +32,7 @@ def _pad(b: bytes, fill: bytes) -> bytes:
 
 def tile_glb(spz: bytes, count: int, sh_degree: int, lo: np.ndarray, hi: np.ndarray) -> bytes:
     """A GLB holding one SPZ blob; lo/hi bound the splat centres (content frame, Z-up)."""
-    # accessor min/max are in the glTF (Y-up) frame of node 0's content... the positions are
-    # the node's local coordinates, i.e. our Z-up values.
+    # POSITION min/max are in the node's local coordinates, i.e. our Z-up content frame
     accessors = [
         {"componentType": 5126, "count": count, "type": "VEC3",
          "min": [float(v) for v in lo], "max": [float(v) for v in hi]},
