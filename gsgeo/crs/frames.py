@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gsgeo.crs.resolve import SourceCRS, source_crs
+from gsgeo.crs.resolve import source_crs
 from gsgeo.crs.transformers import pipeline, transformer
 from gsgeo.errors import InputError
 
@@ -30,11 +30,18 @@ def enu_rotation(lon_deg, lat_deg) -> np.ndarray:
     ], axis=-2)
 
 
+def _rotate(r: np.ndarray, v) -> np.ndarray:
+    """r (3, 3) applied to vectors (..., 3); (r @ v.T).T is ~20x faster than v @ r.T here."""
+    a = np.asarray(v, dtype=np.float64)
+    flat = a.reshape(-1, 3)
+    return np.ascontiguousarray((r @ flat.T).T).reshape(a.shape)
+
+
 def ecef_to_geodetic(xyz, source: str = "EPSG:4978") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Longitude, latitude (degrees) and ellipsoidal height (m) on the source CRS's datum."""
     p = np.asarray(xyz, dtype=np.float64)
     src = source_crs(source)
-    t = transformer(src.id, _geog3d_id(src))
+    t = transformer(src.id, src.geographic_3d_id)
     lon, lat, h = t.transform(p[..., 0], p[..., 1], p[..., 2], errcheck=False)
     return np.asarray(lon), np.asarray(lat), np.asarray(h)
 
@@ -42,15 +49,10 @@ def ecef_to_geodetic(xyz, source: str = "EPSG:4978") -> tuple[np.ndarray, np.nda
 def geodetic_to_ecef(lon, lat, h, source: str = "EPSG:4978") -> np.ndarray:
     """ECEF (m) of longitude, latitude (degrees) and ellipsoidal height (m) on the source datum."""
     src = source_crs(source)
-    t = transformer(_geog3d_id(src), src.id)
+    t = transformer(src.geographic_3d_id, src.id)
     x, y, z = t.transform(np.asarray(lon, float), np.asarray(lat, float), np.asarray(h, float),
                           errcheck=False)
     return np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], axis=-1)
-
-
-def _geog3d_id(src: SourceCRS) -> str:
-    auth = src.geographic_3d.to_authority(min_confidence=100)
-    return f"{auth[0]}:{auth[1]}" if auth else src.geographic_3d.to_wkt()
 
 
 def geodetic_jacobian(lat_deg, h, a: float, f: float) -> tuple[np.ndarray, np.ndarray]:
@@ -116,11 +118,11 @@ class EnuFrame:
 
     def directions_to_enu(self, d_ecef) -> np.ndarray:
         """Direction vectors (..., 3) ECEF -> ENU (rotation only; lengths kept)."""
-        return np.asarray(d_ecef, dtype=np.float64) @ self.rotation.T
+        return _rotate(self.rotation, d_ecef)
 
     def directions_to_ecef(self, d_enu) -> np.ndarray:
         """Direction vectors (..., 3) ENU -> ECEF (rotation only; lengths kept)."""
-        return np.asarray(d_enu, dtype=np.float64) @ self.rotation
+        return _rotate(self.rotation.T, d_enu)
 
     def covariance_to_ecef(self, cov_enu) -> np.ndarray:
         """Covariance(s) (..., 3, 3) ENU -> ECEF: R^T C R (m^2)."""

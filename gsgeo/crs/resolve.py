@@ -133,6 +133,8 @@ class SourceCRS:
     a: float  # semi-major axis, m
     f: float  # flattening
     is_wgs84: bool
+    geographic_2d_id: str = ""  # "EPSG:4326", or WKT when the CRS has no code
+    geographic_3d_id: str = ""
 
 
 def _proj_db() -> str:
@@ -192,5 +194,8 @@ def source_crs(text: str = "EPSG:4978") -> SourceCRS:
     ell = crs.ellipsoid
     a = float(ell.semi_major_metre)
     f = 1.0 / float(ell.inverse_flattening) if ell.inverse_flattening else 0.0
+    ids = [crs_id(c, c.to_wkt()) if c.to_authority(min_confidence=100) else c.to_wkt()
+           for c in comp]
     return SourceCRS(crs, comp[0], comp[1], crs_id(crs, text), a, f,
-                     is_wgs84=crs_id(crs) == "EPSG:4978")
+                     is_wgs84=crs_id(crs) == "EPSG:4978",
+                     geographic_2d_id=ids[0], geographic_3d_id=ids[1])

@@ -1,0 +1,113 @@
+"""Benchmark of gsgeo.crs: ECEF -> ENU throughput, to_grid with covariance, per-point latency.
+
+    python benchmarks/crs.py [--points 100000] [--repeat 3]
+
+Prints a markdown table (paste it into benchmarks/README.md, section "CRS"). Points are
+scattered over 2 km around a site; covariances are random SPD 3x3 matrices.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from gsgeo.crs.frames import EnuFrame, geodetic_to_ecef
+from gsgeo.crs.grid import to_grid, to_grid_many
+from gsgeo.crs.pipeline import measure_point
+from gsgeo.session import Ray, SessionPoint
+
+
+def best(fn, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def site(lon, lat, n, rng, src="EPSG:4978"):
+    return geodetic_to_ecef(lon + rng.uniform(-0.01, 0.01, n), lat + rng.uniform(-0.01, 0.01, n),
+                            rng.uniform(0, 200, n), src)
+
+
+def covs(n, rng):
+    a = rng.normal(0, 0.01, (n, 3, 3))
+    return a @ np.swapaxes(a, 1, 2) + np.eye(3) * 1e-6
+
+
+def write_geoid(path):
+    import rasterio
+    from affine import Affine
+
+    with rasterio.open(path, "w", driver="GTiff", width=400, height=400, count=1, dtype="float32",
+                       crs="EPSG:4326", transform=Affine(0.005, 0, -2.5, 0, -0.005, 53.5)) as ds:
+        ds.write(np.full((400, 400), 47.0, dtype=np.float32), 1)
+    return path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--points", type=int, default=100_000)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args(argv)
+    m, rep = args.points, args.repeat
+    rng = np.random.default_rng(1)
+    rows = []
+
+    def row(what, n, seconds):
+        rows.append((what, n, seconds))
+        print(f"  {what}: {n / seconds:,.0f} /s", file=sys.stderr)
+
+    print(f"gsgeo crs benchmark, {m} points, best of {rep}", file=sys.stderr)
+    p = site(-1.5, 52.5, m, rng)
+    frame = EnuFrame(p[0])
+    d = rng.normal(size=(m, 3))
+    row("ECEF -> ENU points (PROJ topocentric)", m, best(lambda: frame.to_enu(p), rep))
+    row("ENU -> ECEF points", m, best(lambda: frame.to_ecef(p - p[0]), rep))
+    row("ECEF -> ENU directions (rotation)", m, best(lambda: frame.directions_to_enu(d), rep))
+    c = covs(m, rng)
+    row("to_grid_many + covariance, EPSG:4978 -> EPSG:27700 (Helmert)", m,
+        best(lambda: to_grid_many(p, c, "EPSG:27700"), rep))
+    p_de = site(9.5, 50.0, m, rng, "EPSG:4936")
+    row("to_grid_many + covariance, EPSG:4936 -> EPSG:25832 (conversion)", m,
+        best(lambda: to_grid_many(p_de, c, "EPSG:25832", source_crs="EPSG:4936"), rep))
+    p_nl = site(5.3, 52.1, m, rng)
+    row("to_grid_many + covariance, EPSG:4978 -> EPSG:28992", m,
+        best(lambda: to_grid_many(p_nl, c, "EPSG:28992"), rep))
+    with tempfile.TemporaryDirectory() as tmp:
+        g = write_geoid(os.path.join(tmp, "geoid.tif"))
+        to_grid_many(p[:10], None, "EPSG:27700", geoid=g)  # read and cache the raster once
+        row("to_grid_many + covariance + geoid GeoTIFF, EPSG:27700", m,
+            best(lambda: to_grid_many(p, c, "EPSG:27700", geoid=g), rep))
+    k = 2000
+    row("to_grid, one point per call", k,
+        best(lambda: [to_grid(p[i], c[i], "EPSG:27700") for i in range(k)], rep))
+    pts = []
+    for i in range(200):
+        fr = EnuFrame(p[i])
+        o = fr.to_ecef(rng.uniform(-30, 30, (5, 3)) + [0, 0, 40])
+        dd = p[i] - o
+        pts.append(SessionPoint(f"P{i}", [Ray(a, b, ifov=1e-3) for a, b in zip(o, dd, strict=True)]))
+    row("measure_point (5 rays, full pipeline to EPSG:27700)", len(pts),
+        best(lambda: [measure_point(q, crs="EPSG:27700") for q in pts], rep))
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"\nMeasured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on "
+          f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+          f"load average {load:.1f}, Python {platform.python_version()}, numpy {np.__version__}.\n")
+    print("| operation | items | time | throughput |")
+    print("|---|---:|---:|---:|")
+    for what, n, s in rows:
+        print(f"| {what} | {n:,} | {s * 1e3:,.1f} ms | {n / s:,.0f} /s |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
