@@ -1,0 +1,149 @@
+"""Build the demo into a data directory: PLY -> `gsgeo tiles` -> scene, plus the ground truth.
+
+Layout (DATA is the directory `gsgeo serve --data` uses):
+
+- ``DATA/demo/scene.ply``       the splats, INRIA 3DGS PLY in the scene frame
+- ``DATA/demo/checkpoints.csv`` the ground truth: point_id, code, easting, northing, height
+                                (EPSG:27700; height = WGS 84 ellipsoidal, as gsgeo reports)
+- ``DATA/demo/truth.json``      the same with ECEF and scene-frame coordinates, the place,
+                                the georeference and the build version
+- ``DATA/scenes/demo/``         the 3D Tiles scene written by ``gsgeo tiles --crs EPSG:27700
+                                --offset 545400,258100,12``
+
+A build is reused while ``truth.json`` carries the current :data:`VERSION` and the tileset
+exists; otherwise everything is rebuilt (each file written atomically).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import json
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TextIO
+
+from gsgeo.demo import place, scene
+from gsgeo.demo import splats as demo_splats
+from gsgeo.errors import InputError
+
+#: Bump when the geometry, the splats or the georeference change: older builds are rebuilt.
+VERSION = 1
+SCENE_NAME = "demo"
+
+
+@dataclass
+class DemoBuild:
+    data_dir: Path
+    ply: Path
+    tileset: Path
+    checkpoints_csv: Path
+    truth_json: Path
+    splats: int
+    built: bool          # False: an existing build was reused
+    seconds: float
+
+
+def paths(data_dir: str | os.PathLike) -> dict[str, Path]:
+    d = Path(data_dir)
+    return {"ply": d / "demo" / "scene.ply", "csv": d / "demo" / "checkpoints.csv",
+            "truth": d / "demo" / "truth.json", "scene": d / "scenes" / SCENE_NAME}
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def is_built(data_dir: str | os.PathLike) -> bool:
+    """True when DATA holds a complete demo build of the current VERSION."""
+    p = paths(data_dir)
+    if not (p["scene"] / "tileset.json").is_file() or not p["csv"].is_file():
+        return False
+    try:
+        doc = json.loads(p["truth"].read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return doc.get("version") == VERSION
+
+
+def checkpoints_csv_text(truth: list[place.TruthPoint]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["point_id", "code", "easting", "northing", "height", "description"])
+    for t in truth:
+        w.writerow([t.id, t.code, f"{t.easting:.4f}", f"{t.northing:.4f}", f"{t.height:.4f}",
+                    t.description])
+    return buf.getvalue()
+
+
+def _run_tiles(ply: Path, out: Path, progress: TextIO | None) -> dict:
+    """`gsgeo tiles PLY -o OUT --crs EPSG:27700 --offset E,N,H --height ellipsoidal` through the
+    command's own parser and run function; returns its JSON summary."""
+    from gsgeo.cli import build_parser
+
+    offset = ",".join(f"{v:g}" for v in place.OFFSET)
+    argv = ["tiles", str(ply), "-o", str(out), "--crs", place.CRS, "--offset", offset,
+            "--height", "ellipsoidal", "--overwrite", "--json", "--level", "1"]
+    if progress is None:
+        argv.append("--quiet")
+    args = build_parser().parse_args(argv)
+    buf = io.StringIO()
+    err = progress if progress is not None else io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(err):
+        args.run(args)
+    return json.loads(buf.getvalue())
+
+
+def build_demo(data_dir: str | os.PathLike, *, force: bool = False,
+               progress: TextIO | None = sys.stderr) -> DemoBuild:
+    """Build (or reuse) the demo scene and its ground truth in ``data_dir``."""
+    t0 = time.monotonic()
+    d = Path(data_dir)
+    if d.exists() and not d.is_dir():
+        raise InputError(f"--data {d}: is not a directory")
+    p = paths(d)
+    if not force and is_built(d):
+        doc = json.loads(p["truth"].read_text(encoding="utf-8"))
+        return DemoBuild(d, p["ply"], p["scene"], p["csv"], p["truth"], int(doc["splats"]),
+                         False, time.monotonic() - t0)
+
+    def say(msg: str) -> None:
+        if progress is not None:
+            print(f"gsgeo demo: {msg}", file=progress, flush=True)
+
+    p["ply"].parent.mkdir(parents=True, exist_ok=True)
+    p["scene"].parent.mkdir(parents=True, exist_ok=True)
+    say("sampling splats on the scene geometry ...")
+    part = demo_splats.build_part()
+    n = demo_splats.write_ply(p["ply"], part)
+    say(f"wrote {n:,} splats to {p['ply']}; converting with gsgeo tiles "
+        f"--crs {place.CRS} --offset {','.join(f'{v:g}' for v in place.OFFSET)} ...")
+    summary = _run_tiles(p["ply"], p["scene"], progress)
+    truth = place.truth_points()
+    _atomic_write(p["csv"], checkpoints_csv_text(truth))
+    doc = {
+        "version": VERSION,
+        "place": place.PLACE,
+        "crs": place.CRS,
+        "offset": list(place.OFFSET),
+        "georeference": f"gsgeo tiles --crs {place.CRS} --offset "
+                        f"{','.join(f'{v:g}' for v in place.OFFSET)} --height ellipsoidal "
+                        "(scene frame = grid E, N and OSGB36 ellipsoidal height minus offset)",
+        "heights": "check point heights are WGS 84 ellipsoidal heights (what gsgeo reports "
+                   "for EPSG:27700 without --vertical)",
+        "splats": n,
+        "tiles": summary.get("tiles"),
+        "points": [asdict(t) for t in truth],
+        "subsets": list(scene.SUBSETS),
+    }
+    _atomic_write(p["truth"], json.dumps(doc, indent=1))   # written last: marks the build done
+    say(f"scene {p['scene']} ({summary.get('tiles')} tiles) and {len(truth)} check points "
+        f"in {time.monotonic() - t0:.1f} s")
+    return DemoBuild(d, p["ply"], p["scene"], p["csv"], p["truth"], n, True,
+                     time.monotonic() - t0)
