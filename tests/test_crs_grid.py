@@ -119,12 +119,22 @@ def test_feet_crs_gives_feet_coordinates_and_metre_sigmas():
 def test_transformers_are_cached_not_built_per_point():
     p = _points(-1.5, 52.5, n=1)
     to_grid(p[0], np.eye(3), "EPSG:27700")
-    before = (tr._transformer.cache_info().misses, tr._candidates.cache_info().misses)
+    before = (tr._transformer.cache_info().misses, tr.BUILDS["groups"])
     for _ in range(50):
         to_grid(p[0], np.eye(3), "EPSG:27700")
     to_grid_many(np.repeat(p, 1000, axis=0), None, "EPSG:27700")
-    after = (tr._transformer.cache_info().misses, tr._candidates.cache_info().misses)
+    after = (tr._transformer.cache_info().misses, tr.BUILDS["groups"])
     assert after == before
+
+
+def test_to_grid_from_many_threads_agrees():
+    from concurrent.futures import ThreadPoolExecutor
+
+    p = _points(-1.5, 52.5, n=200)
+    ref = to_grid_many(p, None, "EPSG:27700").easting
+    with ThreadPoolExecutor(4) as ex:
+        outs = list(ex.map(lambda i: to_grid(p[i], None, "EPSG:27700").easting, range(200)))
+    np.testing.assert_array_equal(np.array(outs), ref)
 
 
 @pytest.mark.parametrize(

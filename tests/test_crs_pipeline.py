@@ -183,3 +183,25 @@ def test_bad_exclusions_and_session_level_errors(truth, rng):
         measure_session(sess, crs="EPSG:4326")
     with pytest.raises(CRSError, match="not geocentric"):
         measure_session(sess, source_crs="EPSG:4326")
+
+
+def test_model_matrix_scale_keeps_ifov_valid(truth, rng):
+    """A uniformly scaled, rotated modelMatrix gives the same point and covariance as identity:
+    directions go through the linear part and are re-normalised, ifov is an angle."""
+    p, _ = truth
+    o = camera_origins(p, 4, rng)
+    d = noisy_directions(o, p, IFOV, rng)
+    plain = measure_point(_session_point("I", o, d, np.eye(4)), crs="EPSG:27700")
+    m = model_matrix(p, angle_deg=3.0, scale=1.25, shift=(40.0, 0.0, -10.0))
+    o_r, d_r = render(m, o, d)
+    moved = measure_point(_session_point("M", o_r, d_r, m), crs="EPSG:27700")
+    np.testing.assert_allclose(moved.point_ecef, plain.point_ecef, atol=1e-6)
+    np.testing.assert_allclose(moved.grid.covariance, plain.grid.covariance, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(moved.residuals_px, plain.residuals_px, rtol=1e-6)
+    assert not any("model_matrix" in w for w in moved.warnings)
+    shear = m.copy()
+    shear[0, 1] += 0.05
+    o_s, d_s = render(shear, o, d)
+    sheared = measure_point(_session_point("S", o_s, d_s, shear), crs="EPSG:27700")
+    np.testing.assert_allclose(sheared.point_ecef, plain.point_ecef, atol=1e-6)
+    assert any("not a rotation with uniform scale" in w for w in sheared.warnings)

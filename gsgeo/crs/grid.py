@@ -284,10 +284,12 @@ def full_jacobian(j_llh: np.ndarray, lon, lat, h, a: float, f: float) -> np.ndar
 def analytic_jacobian(points_ecef, crs: str, source_crs: str = "EPSG:4978") -> np.ndarray:
     """d(E, N, h)/d(X, Y, Z) from the projection's point scale factor and meridian convergence.
 
-    For a conformal projection, d(E, N) = k R(gamma) d(e, n) with k the point scale factor and
-    gamma the meridian convergence (pyproj ``get_factors``, evaluated on the source datum's
-    longitude and latitude: the datum shift moves them by ~1e-5 degrees at most, a 1e-9
-    relative change of k). Independent of the numerical path in `to_grid`; used to check it.
+    Where meridians and parallels stay perpendicular on the map (conformal projections, and
+    conics such as Albers), d(E, N) = R(gamma) diag(k_parallel, k_meridian) d(e, n) with the
+    scale factors and the meridian convergence gamma from pyproj's ``get_factors``, evaluated
+    on the source datum's longitude and latitude (a datum shift of ~100 m changes k by ~1e-9).
+    A datum transformation's own scale and rotation (a few 1e-5 for a Helmert) are not in it.
+    Independent of the numerical path in `to_grid`; the tests use it to check that path.
     """
     from pyproj import Proj
 
@@ -299,8 +301,7 @@ def analytic_jacobian(points_ecef, crs: str, source_crs: str = "EPSG:4978") -> n
     k = np.asarray(fac.meridional_scale)  # = parallel scale for a conformal projection
     kp = np.asarray(fac.parallel_scale)
     gam = np.radians(np.asarray(fac.meridian_convergence))
-    # Grid north is rotated gamma clockwise... from true north by PROJ's sign convention:
-    # a true-north step (0, dn) maps to (E, N) = k dn (-sin gamma, cos gamma); conformal.
+    # PROJ's convergence: a true-north step dn maps to (E, N) = k dn (-sin gamma, cos gamma).
     r = enu_rotation(lon, lat)
     jac = np.empty((pts.shape[0], 3, 3))
     c, s = np.cos(gam), np.sin(gam)

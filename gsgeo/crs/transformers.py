@@ -4,12 +4,17 @@ A Transformer is built once per (source, target, PROJ data directory) and reused
 point (``functools.lru_cache``); gsgeo never builds one per point. Operations are chosen
 explicitly from PROJ's ranked candidates (`TransformerGroup`) so that the operation used is
 known before transforming and recorded with each result.
+
+Threads: a plain pyproj Transformer is thread-safe (one PROJ object per thread), but the
+transformers of a TransformerGroup are not, so candidate groups are cached per thread.
 """
 
 from __future__ import annotations
 
 import functools
+import threading
 import warnings
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,18 +60,29 @@ class Candidates:
     unavailable: tuple  # pyproj Operation objects (their grids are missing)
 
 
-@functools.lru_cache(maxsize=128)
-def _candidates(src: str, dst: str, datadir: str) -> Candidates:
-    with warnings.catch_warnings():
-        # "Best transformation is not available": gsgeo reports this itself, by grid name.
-        warnings.simplefilter("ignore", UserWarning)
-        tg = TransformerGroup(parse_crs(src), parse_crs(dst), always_xy=True)
-    return Candidates(tuple(tg.transformers), tuple(tg.unavailable_operations))
+_local = threading.local()
+#: How many TransformerGroups were built (tests check that points reuse them).
+BUILDS: Counter = Counter()
 
 
 def candidates(src: str, dst: str) -> Candidates:
     """Cached TransformerGroup candidates (best first) between two CRSs given as text."""
-    return _candidates(src, dst, _datadir())
+    cache = getattr(_local, "groups", None)
+    if cache is None:
+        cache = _local.groups = {}
+    key = (src, dst, _datadir())
+    found = cache.get(key)
+    if found is None:
+        with warnings.catch_warnings():
+            # "Best transformation is not available": gsgeo reports this itself, by grid name.
+            warnings.simplefilter("ignore", UserWarning)
+            tg = TransformerGroup(parse_crs(src), parse_crs(dst), always_xy=True)
+        found = Candidates(tuple(tg.transformers), tuple(tg.unavailable_operations))
+        BUILDS["groups"] += 1
+        if len(cache) >= 128:
+            cache.clear()
+        cache[key] = found
+    return found
 
 
 def in_area(t: Transformer, lon: float, lat: float) -> bool:
