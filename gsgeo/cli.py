@@ -15,6 +15,7 @@ COMMANDS = {
     "tiles": "gsgeo.commands.tiles",
     "crs": "gsgeo.commands.crs",
     "serve": "gsgeo.commands.serve",
+    "demo": "gsgeo.commands.demo",
 }
 
 EXIT_USAGE = 2

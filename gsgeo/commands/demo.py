@@ -1,0 +1,59 @@
+"""`gsgeo demo`: build the demo scene with ground truth, create the demo project, serve it."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from gsgeo.errors import InputError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "demo",
+        help="build the demo scene with ground truth and serve it (the quickest way in)",
+        description="Build a synthetic georeferenced 3DGS scene (Parker's Piece, Cambridge, in "
+                    "British National Grid EPSG:27700) with 20 surveyed validation points, "
+                    "create the project 'demo' holding them as check points, and serve the "
+                    "viewer. Measure a marker, name the point after it (e.g. G1) and the "
+                    "accuracy panel shows the difference to the truth.",
+    )
+    p.add_argument("--data", default="gsgeo-data", metavar="DIR",
+                   help="data directory (default: ./gsgeo-data); the scene goes to "
+                        "DIR/scenes/demo, the ground truth to DIR/demo/checkpoints.csv")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    p.add_argument("--rebuild", action="store_true", help="rebuild the scene even if present")
+    p.add_argument("--no-serve", action="store_true",
+                   help="build the scene and the project, print where they are, and exit")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from gsgeo.demo.build import build_demo
+    from gsgeo.demo.project import PROJECT_ID, ensure_project
+
+    if not 0 <= args.port <= 65535:
+        raise InputError(f"--port must be between 0 and 65535, got {args.port}")
+    data = Path(args.data)
+    build = build_demo(data, force=args.rebuild)
+    if not build.built:
+        print(f"gsgeo demo: using the scene built in {build.tileset}", file=sys.stderr)
+    project, n_check = ensure_project(data, build)
+    url = f"http://{args.host}:{args.port}/?scene=demo&project={project.id}"
+    print(f"demo scene   {build.tileset / 'tileset.json'} ({build.splats:,} splats)")
+    print(f"ground truth {build.checkpoints_csv} ({n_check} check points, EPSG:27700, "
+          "WGS 84 ellipsoidal heights)")
+    print(f"project      '{PROJECT_ID}' in {data.resolve() / 'gsgeo.sqlite'}")
+    if args.no_serve:
+        print(f"serve it     gsgeo serve --data {data} and open {url}")
+        return 0
+    print(f"open         {url}")
+    print("measure      press M, click a marker in 2-5 views, Enter; name the point after the "
+          "marker (G1-G4, R1, B1-B6, T1-T5, S1-S4) to see its difference to the truth",
+          flush=True)
+    from gsgeo.commands import serve
+
+    return serve.run(argparse.Namespace(data=str(data), host=args.host, port=args.port, web=None,
+                                        log_level="warning"))
