@@ -1,0 +1,130 @@
+// Scene graphics: rays, point markers, error ellipsoids, lines and polygons, all in the
+// rendered ECEF frame (georeferenced ECEF carried through the tileset's current modelMatrix).
+
+import { eigSym3, transformCovariance, applyPoint } from "./linalg.js";
+
+const Cesium = window.Cesium;
+
+export const COLORS = {
+  ray: Cesium.Color.fromCssColorString("#f5b700"),
+  outlier: Cesium.Color.fromCssColorString("#ff3b30"),
+  excluded: Cesium.Color.fromCssColorString("#8a939b"),
+  point: Cesium.Color.fromCssColorString("#f5b700"),
+  selected: Cesium.Color.fromCssColorString("#3ea6ff"),
+  solution: Cesium.Color.fromCssColorString("#00e5ff"),
+  line: Cesium.Color.fromCssColorString("#3fb950"),
+  polygon: Cesium.Color.fromCssColorString("#d2a8ff"),
+  draft: Cesium.Color.fromCssColorString("#ffffff"),
+};
+
+/** The 3-D confidence scale of a drawn ellipsoid: 95 % (sqrt of chi-square(3) 0.95) or 1 sigma. */
+export const SCALE_95_3D = 2.7955;
+
+export function cart(p) {
+  return new Cesium.Cartesian3(p[0], p[1], p[2]);
+}
+
+/** Semi-axes (m, descending) and the rotation (columns = principal axes) of the ellipsoid
+ *  k * sqrt(eigenvalues) of covariance `cov` (3x3 rows, m^2, ECEF axes). */
+export function ellipsoidAxes(cov, k) {
+  const { values, vectors } = eigSym3(cov);
+  const radii = values.map((v) => k * Math.sqrt(Math.max(v, 0)));
+  return { radii, vectors };
+}
+
+export class Drawer {
+  constructor(viewer) {
+    this.viewer = viewer;
+    this.ds = new Cesium.CustomDataSource("gsgeo");
+    viewer.dataSources.add(this.ds);
+    this.groups = new Map();
+  }
+
+  clear(group) {
+    const list = this.groups.get(group) || [];
+    for (const e of list) this.ds.entities.remove(e);
+    this.groups.set(group, []);
+  }
+
+  add(group, options) {
+    const e = this.ds.entities.add(options);
+    if (!this.groups.has(group)) this.groups.set(group, []);
+    this.groups.get(group).push(e);
+    return e;
+  }
+
+  batch(fn) {
+    this.ds.entities.suspendEvents();
+    try { fn(); } finally { this.ds.entities.resumeEvents(); }
+  }
+
+  /** A ray from `origin` along unit `direction` for `len` metres (rendered ECEF). */
+  ray(group, origin, direction, len, color, label) {
+    const end = [origin[0] + direction[0] * len, origin[1] + direction[1] * len,
+      origin[2] + direction[2] * len];
+    this.add(group, {
+      polyline: {
+        positions: [cart(origin), cart(end)], width: 2, arcType: Cesium.ArcType.NONE,
+        material: color, depthFailMaterial: color.withAlpha(0.45),
+      },
+    });
+    this.add(group, {
+      position: cart(origin),
+      point: { pixelSize: 6, color, outlineColor: Cesium.Color.BLACK, outlineWidth: 1,
+        disableDepthTestDistance: Number.POSITIVE_INFINITY },
+      label: label ? {
+        text: label, font: "12px sans-serif", fillColor: color, outlineColor: Cesium.Color.BLACK,
+        outlineWidth: 3, style: Cesium.LabelStyle.FILL_AND_OUTLINE, pixelOffset: new Cesium.Cartesian2(6, -6),
+        horizontalOrigin: Cesium.HorizontalOrigin.LEFT, verticalOrigin: Cesium.VerticalOrigin.BOTTOM,
+        disableDepthTestDistance: Number.POSITIVE_INFINITY,
+      } : undefined,
+    });
+  }
+
+  /** A point marker with its id; `id` becomes the entity id "pt:<id>" for picking. */
+  marker(group, id, position, color, size = 9) {
+    return this.add(group, {
+      id: group === "points" ? `pt:${id}` : undefined,
+      position: cart(position),
+      point: { pixelSize: size, color, outlineColor: Cesium.Color.BLACK, outlineWidth: 1.5,
+        disableDepthTestDistance: Number.POSITIVE_INFINITY },
+      label: {
+        text: id, font: "bold 13px sans-serif", fillColor: Cesium.Color.WHITE,
+        outlineColor: Cesium.Color.BLACK, outlineWidth: 3, style: Cesium.LabelStyle.FILL_AND_OUTLINE,
+        pixelOffset: new Cesium.Cartesian2(8, -6), horizontalOrigin: Cesium.HorizontalOrigin.LEFT,
+        verticalOrigin: Cesium.VerticalOrigin.BOTTOM, disableDepthTestDistance: Number.POSITIVE_INFINITY,
+      },
+    });
+  }
+
+  /** The error ellipsoid of a point: georeferenced ECEF point and covariance (m^2), drawn through
+   *  the model matrix `mm` (column-major) at confidence scale k. Returns the semi-axes (m). */
+  ellipsoid(group, pointGeo, covGeo, mm, k, color) {
+    const p = applyPoint(mm, pointGeo);
+    const cov = transformCovariance(mm, covGeo);
+    const { radii, vectors } = ellipsoidAxes(cov, k);
+    if (!radii.every((r) => Number.isFinite(r) && r > 0)) return radii;
+    const rot = Cesium.Matrix3.fromColumnMajorArray([...vectors[0], ...vectors[1], ...vectors[2]]);
+    this.add(group, {
+      position: cart(p),
+      orientation: Cesium.Quaternion.fromRotationMatrix(rot),
+      ellipsoid: {
+        radii: new Cesium.Cartesian3(radii[0], radii[1], radii[2]),
+        material: color.withAlpha(0.45), outline: true, outlineColor: color,
+        slicePartitions: 24, stackPartitions: 16,
+      },
+    });
+    return radii;
+  }
+
+  /** A polyline through rendered positions; closed when `closed`. */
+  path(group, positions, color, closed = false, width = 3) {
+    const pts = positions.map(cart);
+    if (closed && pts.length > 2) pts.push(pts[0]);
+    if (pts.length < 2) return;
+    this.add(group, {
+      polyline: { positions: pts, width, arcType: Cesium.ArcType.NONE, material: color,
+        depthFailMaterial: color.withAlpha(0.5) },
+    });
+  }
+}

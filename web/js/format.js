@@ -1,0 +1,46 @@
+// Number and text formatting for the panels (metres in, readable strings out).
+
+export function fixed(x, digits = 3) {
+  return x === null || x === undefined || !Number.isFinite(x) ? "—" : x.toFixed(digits);
+}
+
+/** metres -> millimetres with one decimal ("—" when missing). */
+export function mm(x, digits = 1) {
+  return x === null || x === undefined || !Number.isFinite(x) ? "—" : (x * 1000).toFixed(digits);
+}
+
+/** A length in metres with a sensible unit. */
+export function length(x) {
+  if (x === null || x === undefined || !Number.isFinite(x)) return "—";
+  const a = Math.abs(x);
+  if (a < 0.1) return `${(x * 1000).toFixed(1)} mm`;
+  if (a < 1000) return `${x.toFixed(3)} m`;
+  return `${(x / 1000).toFixed(4)} km`;
+}
+
+export function area(x) {
+  if (x === null || x === undefined || !Number.isFinite(x)) return "—";
+  return Math.abs(x) < 1e5 ? `${x.toFixed(3)} m²` : `${(x / 1e4).toFixed(4)} ha`;
+}
+
+export function escapeHtml(s) {
+  return String(s ?? "").replace(/[&<>"']/g, (c) => ({
+    "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;",
+  }[c]));
+}
+
+/** Element helper: h("td", {class: "num"}, "1.0") */
+export function h(tag, attrs = {}, ...children) {
+  const el = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k.startsWith("on")) el.addEventListener(k.slice(2), v);
+    else if (k === "class") el.className = v;
+    else el.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children.flat()) {
+    if (c === null || c === undefined || c === false) continue;
+    el.append(c instanceof Node ? c : document.createTextNode(String(c)));
+  }
+  return el;
+}

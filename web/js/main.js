@@ -1,0 +1,986 @@
+// gsgeo measuring workplace: scene and project, multi-ray point measurement, points,
+// lines and polygons, check points, export. Talks to the gsgeo server's /api.
+
+import { api, download, ApiError } from "./api.js";
+import { Drawer, COLORS, SCALE_95_3D, cart } from "./draw.js";
+import { applyPoint, applyDirection, norm, sub, IDENTITY16 } from "./linalg.js";
+import { fixed, mm, length, area, h } from "./format.js";
+import { captureRay } from "./rays.js";
+
+const Cesium = window.Cesium;
+const $ = (sel) => document.querySelector(sel);
+
+// ---------------------------------------------------------------------------------------
+// state
+
+const state = {
+  scenes: [],
+  sceneName: null,
+  tileset: null,
+  projects: [],
+  project: null,
+  points: [],
+  lines: [],
+  polygons: [],
+  checkPoints: 0,
+  selected: null, // point id
+  mode: "idle", // idle | measure | line | polygon
+  measure: null, // {rays, excluded:Set, editing, pointId, solution, error, seq, busy}
+  feature: null, // {kind, points: []}
+  conf: "95",
+};
+
+// ---------------------------------------------------------------------------------------
+// viewer
+
+Cesium.Ion.defaultAccessToken = "";
+const viewer = new Cesium.Viewer("cesium", {
+  baseLayer: false,
+  baseLayerPicker: false,
+  geocoder: false,
+  homeButton: false,
+  sceneModePicker: false,
+  navigationHelpButton: false,
+  animation: false,
+  timeline: false,
+  fullscreenButton: false,
+  infoBox: false,
+  selectionIndicator: false,
+  terrainProvider: new Cesium.EllipsoidTerrainProvider(),
+});
+viewer.scene.globe.baseColor = Cesium.Color.fromCssColorString("#3a4046");
+viewer.scene.globe.showGroundAtmosphere = false;
+viewer.scene.fog.enabled = false;
+viewer.cesiumWidget.screenSpaceEventHandler.removeInputAction(Cesium.ScreenSpaceEventType.LEFT_CLICK);
+viewer.cesiumWidget.screenSpaceEventHandler.removeInputAction(Cesium.ScreenSpaceEventType.LEFT_DOUBLE_CLICK);
+const draw = new Drawer(viewer);
+
+window.gsgeo = {
+  viewer,
+  Cesium,
+  get tileset() { return state.tileset; },
+  get state() { return state; },
+};
+
+function modelMatrix() {
+  return state.tileset ? Cesium.Matrix4.toArray(state.tileset.modelMatrix) : IDENTITY16.slice();
+}
+
+// ---------------------------------------------------------------------------------------
+// messages and status line
+
+function message(text, isError = false) {
+  const box = $("#messages");
+  const el = h("div", { class: isError ? "error" : "" }, text);
+  box.prepend(el);
+  while (box.children.length > 4) box.lastChild.remove();
+  setTimeout(() => el.remove(), isError ? 15000 : 6000);
+}
+
+function fail(exc) {
+  message(exc instanceof ApiError || exc instanceof Error ? exc.message : String(exc), true);
+}
+
+function nextPointId() {
+  const used = new Set(state.points.map((p) => p.id));
+  let n = 1;
+  for (const p of state.points) {
+    const m = /^P(\d+)$/.exec(p.id);
+    if (m) n = Math.max(n, Number(m[1]) + 1);
+  }
+  while (used.has(`P${n}`)) n++;
+  return `P${n}`;
+}
+
+function updateStatus() {
+  const el = $("#status");
+  el.className = "";
+  let text;
+  if (state.mode === "measure") {
+    const m = state.measure;
+    const n = m.rays.length;
+    const name = m.editing ? `point ${m.editing}` : m.pointId;
+    el.className = "measuring";
+    if (n === 0) text = `Measuring ${name}: click the feature to add ray 1. Esc cancels.`;
+    else if (n === 1) text = `Ray 1 of ${name} added. Move the camera to another viewpoint (30° or more away) and click the same feature for ray 2. Backspace removes ray 1, Esc cancels.`;
+    else text = `${n} rays on ${name}. Click the feature from another viewpoint for ray ${n + 1}, or press Enter to store it. Backspace removes ray ${n}, Esc cancels.`;
+  } else if (state.mode === "line" || state.mode === "polygon") {
+    const f = state.feature;
+    const need = f.kind === "line" ? 2 : 3;
+    el.className = "picking";
+    text = `New ${f.kind}: click a measured point in the scene or the list (${f.points.length} picked`
+      + `${f.points.length ? ": " + f.points.join(" → ") : ""}). `
+      + (f.points.length >= need ? "Enter stores it. " : `Needs ${need} points. `)
+      + "Backspace removes the last, Esc cancels.";
+  } else if (!state.sceneName) {
+    text = "No scene loaded. Make one with `gsgeo tiles INPUT.ply -o DATA/scenes/NAME --origin LAT,LON,H` and pick it above.";
+  } else if (!state.project) {
+    text = "Create or open a project (top bar) to store points. M measures a point, ? shows help.";
+  } else {
+    text = "M (or Measure point) starts a point; a click on a point marker selects it. L line, P polygon, ? help. Drag rotates, wheel zooms.";
+  }
+  el.textContent = text;
+}
+
+// ---------------------------------------------------------------------------------------
+// scenes
+
+async function loadScenes() {
+  const data = await api("GET", "/scenes");
+  state.scenes = data.scenes;
+  const sel = $("#scene-select");
+  sel.replaceChildren(...(state.scenes.length ? [] : [h("option", { value: "" }, "— no scenes —")]),
+    ...state.scenes.map((s) => h("option", { value: s.name }, s.name)));
+}
+
+async function loadScene(name) {
+  if (state.tileset) {
+    viewer.scene.primitives.remove(state.tileset);
+    state.tileset = null;
+  }
+  state.sceneName = null;
+  const info = state.scenes.find((s) => s.name === name);
+  const msg = $("#scene-message");
+  if (!info) {
+    msg.hidden = false;
+    msg.textContent = state.scenes.length ? `There is no scene '${name}'.`
+      : "No scenes in the data directory. Make one with gsgeo tiles (see README).";
+    updateStatus();
+    return;
+  }
+  if (info.error) {
+    msg.hidden = false;
+    msg.textContent = `Scene '${name}': ${info.error}`;
+    return;
+  }
+  msg.hidden = true;
+  $("#scene-select").value = name;
+  try {
+    const tileset = await Cesium.Cesium3DTileset.fromUrl(info.url, { maximumScreenSpaceError: 8 });
+    tileset.tileFailed.addEventListener((e) => message(`A tile of '${name}' failed to load: ${e.message}`, true));
+    window.gsgeo.tilesReady = false;
+    tileset.initialTilesLoaded.addEventListener(() => { window.gsgeo.tilesReady = true; });
+    viewer.scene.primitives.add(tileset);
+    state.tileset = tileset;
+    state.sceneName = name;
+    lastModelMatrix = modelMatrix();
+    const r = tileset.boundingSphere.radius;
+    await viewer.zoomTo(tileset, new Cesium.HeadingPitchRange(0.4, -0.6, r * 2.2));
+  } catch (exc) {
+    msg.hidden = false;
+    msg.textContent = `Scene '${name}' cannot be loaded: ${exc.message || exc}`;
+  }
+  setUrl();
+  redrawAll();
+  updateStatus();
+}
+
+// ---------------------------------------------------------------------------------------
+// projects
+
+async function loadProjects() {
+  const data = await api("GET", "/projects");
+  state.projects = data.projects;
+  renderProjectSelect();
+}
+
+function renderProjectSelect() {
+  const sel = $("#project-select");
+  sel.replaceChildren(h("option", { value: "" }, state.projects.length ? "— choose —" : "— none yet —"),
+    ...state.projects.map((p) => h("option", { value: p.id }, p.name)));
+  sel.value = state.project ? state.project.id : "";
+}
+
+function renderProjectInfo() {
+  const p = state.project;
+  const el = $("#project-info");
+  if (!p) { el.textContent = ""; return; }
+  const vert = p.vertical ? ` + ${p.vertical}` : (p.geoid ? ` + geoid ${p.geoid}` : ", ellipsoidal heights");
+  el.textContent = `${p.crs || "no grid CRS (WGS 84 only)"}${vert} · σpx ${p.sigma_px}`;
+  el.title = `source ${p.source_crs}; ${el.textContent}`;
+  const unit = p.crs ? "" : " (lon/lat/h)";
+  $("#th-e").textContent = p.crs ? "E" : "lon";
+  $("#th-n").textContent = p.crs ? "N" : "lat";
+  $("#th-h").textContent = "H" + unit.slice(0, 0);
+}
+
+async function openProject(pid) {
+  if (!pid) {
+    state.project = null;
+    state.points = []; state.lines = []; state.polygons = [];
+    renderAll();
+    return;
+  }
+  state.project = await api("GET", `/projects/${encodeURIComponent(pid)}`);
+  renderProjectSelect();
+  renderProjectInfo();
+  if (state.project.scene && state.project.scene !== state.sceneName
+      && state.scenes.some((s) => s.name === state.project.scene)) {
+    await loadScene(state.project.scene);
+  }
+  state.selected = null;
+  await refreshProjectData();
+  setUrl();
+}
+
+async function refreshProjectData() {
+  if (!state.project) return;
+  const pid = encodeURIComponent(state.project.id);
+  const [pts, lines, polys, cps] = await Promise.all([
+    api("GET", `/projects/${pid}/points`), api("GET", `/projects/${pid}/lines`),
+    api("GET", `/projects/${pid}/polygons`), api("GET", `/projects/${pid}/checkpoints`),
+  ]);
+  state.points = pts.points;
+  state.lines = lines.lines;
+  state.polygons = polys.polygons;
+  state.checkPoints = cps.check_points.length;
+  renderAll();
+  if (state.checkPoints) await loadAccuracy();
+  else $("#accuracy").replaceChildren();
+}
+
+function setUrl() {
+  const q = new URLSearchParams();
+  if (state.sceneName) q.set("scene", state.sceneName);
+  if (state.project) q.set("project", state.project.id);
+  history.replaceState(null, "", `${location.pathname}?${q}`);
+}
+
+// project dialog ---------------------------------------------------------------------------
+
+let dialogMode = "new";
+let crsTimer = null;
+
+function openProjectDialog(mode) {
+  dialogMode = mode;
+  const p = mode === "edit" ? state.project : null;
+  if (mode === "edit" && !p) { message("Open a project first.", true); return; }
+  $("#project-dialog-title").textContent = p ? `Settings of ${p.name}` : "New project";
+  $("#pf-submit").textContent = p ? "Save" : "Create";
+  $("#pf-name").value = p ? p.name : "";
+  $("#pf-scene").replaceChildren(h("option", { value: "" }, "—"),
+    ...state.scenes.map((s) => h("option", { value: s.name }, s.name)));
+  $("#pf-scene").value = p ? (p.scene || "") : (state.sceneName || "");
+  $("#pf-crs").textContent = p && p.crs ? p.crs : "none (WGS 84 positions only)";
+  $("#pf-crs").dataset.code = p && p.crs ? p.crs : "";
+  $("#pf-crs-q").value = "";
+  $("#pf-crs-results").replaceChildren();
+  $("#pf-vertical").value = p && p.vertical ? p.vertical : "";
+  $("#pf-geoid").value = p && p.geoid ? p.geoid : "";
+  $("#pf-source").value = p ? p.source_crs : "EPSG:4978";
+  $("#pf-sigma").value = p ? p.sigma_px : 1.0;
+  $("#pf-error").textContent = "";
+  $("#project-dialog").hidden = false;
+  $("#pf-name").focus();
+}
+
+async function searchCrs() {
+  const q = $("#pf-crs-q").value.trim();
+  const list = $("#pf-crs-results");
+  if (!q) { list.replaceChildren(); return; }
+  try {
+    const data = await api("GET", `/crs?q=${encodeURIComponent(q)}&limit=30`);
+    if ($("#pf-crs-q").value.trim() !== q) return;
+    list.replaceChildren(...(data.results.length ? data.results.map((r) => h("li", {
+      "data-code": r.code, title: r.area || "",
+      onclick: () => {
+        $("#pf-crs").textContent = `${r.code} — ${r.name}`;
+        $("#pf-crs").dataset.code = r.code;
+        list.querySelectorAll("li").forEach((li) => li.classList.toggle("selected", li.dataset.code === r.code));
+      },
+    }, `${r.code} — ${r.name}${r.kind === "compound" ? " (compound)" : ""}`))
+      : [h("li", {}, `nothing matches '${q}'`)]));
+  } catch (exc) {
+    list.replaceChildren(h("li", { class: "error" }, exc.message));
+  }
+}
+
+async function submitProject(ev) {
+  ev.preventDefault();
+  let crs = $("#pf-crs").dataset.code || null;
+  const typed = $("#pf-crs-q").value.trim();
+  if (!crs && /^[A-Za-z]+:\d+$/.test(typed)) crs = typed.toUpperCase();
+  const body = {
+    name: $("#pf-name").value.trim(),
+    scene: $("#pf-scene").value || null,
+    crs,
+    vertical: $("#pf-vertical").value.trim() || null,
+    geoid: $("#pf-geoid").value.trim() || null,
+    source_crs: $("#pf-source").value.trim() || "EPSG:4978",
+    sigma_px: Number($("#pf-sigma").value),
+  };
+  try {
+    let p;
+    if (dialogMode === "edit") {
+      p = await api("PATCH", `/projects/${encodeURIComponent(state.project.id)}`, body);
+    } else {
+      p = await api("POST", "/projects", body);
+    }
+    $("#project-dialog").hidden = true;
+    await loadProjects();
+    await openProject(p.id);
+    message(dialogMode === "edit" ? `Saved the settings of ${p.name}; points were re-solved.` : `Created project ${p.name}.`);
+  } catch (exc) {
+    $("#pf-error").textContent = exc.message;
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// measuring
+
+function startMeasure(editPoint = null) {
+  if (state.mode === "line" || state.mode === "polygon") cancelFeature();
+  if (state.mode === "measure") return;
+  state.mode = "measure";
+  state.measure = {
+    rays: editPoint ? editPoint.rays.map((r) => ({ ...r })) : [],
+    excluded: new Set(editPoint ? editPoint.excluded : []),
+    editing: editPoint ? editPoint.id : null,
+    pointId: editPoint ? editPoint.id : nextPointId(),
+    solution: null, error: null, seq: 0,
+  };
+  $("#pt-code").value = editPoint ? editPoint.code : "";
+  $("#pt-desc").value = editPoint ? editPoint.description : "";
+  $("#btn-measure").classList.add("active");
+  $("#measure-panel").hidden = false;
+  $("#measure-title").textContent = editPoint ? `Adding rays to ${editPoint.id}` : `New point ${state.measure.pointId}`;
+  if (editPoint) solveLive(); else renderMeasure();
+  updateStatus();
+}
+
+function endMeasure() {
+  state.mode = "idle";
+  state.measure = null;
+  $("#btn-measure").classList.remove("active");
+  $("#measure-panel").hidden = true;
+  draw.clear("current");
+  updateStatus();
+}
+
+function addRay(windowPosition) {
+  const ray = captureRay(viewer, windowPosition, modelMatrix());
+  if (!ray) { message("This click gives no ray (is the camera perspective?).", true); return; }
+  state.measure.rays.push(ray);
+  solveLive();
+  updateStatus();
+}
+
+function removeLastRay() {
+  const m = state.measure;
+  if (!m.rays.length) { message("There is no ray to remove; Esc cancels the point."); return; }
+  m.rays.pop();
+  m.excluded.delete(m.rays.length);
+  solveLive();
+  updateStatus();
+}
+
+function settings() {
+  const p = state.project;
+  return p ? { crs: p.crs, vertical: p.vertical, geoid: p.geoid, source_crs: p.source_crs, sigma_px: p.sigma_px }
+    : { crs: null, vertical: null, geoid: null, source_crs: "EPSG:4978", sigma_px: 1.0 };
+}
+
+async function solveLive() {
+  const m = state.measure;
+  const seq = ++m.seq;
+  m.solution = null;
+  m.error = null;
+  const active = m.rays.length - [...m.excluded].filter((i) => i < m.rays.length).length;
+  if (active < 2) { renderMeasure(); return; }
+  renderMeasure(true);
+  try {
+    const res = await api("POST", "/intersect", {
+      rays: m.rays, exclude: [...m.excluded].filter((i) => i < m.rays.length),
+      id: m.pointId, ...settings(),
+    });
+    if (state.measure !== m || seq !== m.seq) return;
+    m.solution = res;
+  } catch (exc) {
+    if (state.measure !== m || seq !== m.seq) return;
+    m.error = exc.message;
+  }
+  renderMeasure();
+}
+
+async function finishMeasure() {
+  const m = state.measure;
+  if (!state.project) { message("Create or open a project first (top bar), then press Enter again.", true); return; }
+  if (m.rays.length < 2) { message(`A point needs at least 2 rays; ${m.pointId} has ${m.rays.length}.`, true); return; }
+  const code = $("#pt-code").value.trim();
+  const description = $("#pt-desc").value.trim();
+  const pid = encodeURIComponent(state.project.id);
+  const excluded = [...m.excluded].filter((i) => i < m.rays.length).sort((a, b) => a - b);
+  try {
+    let pt;
+    if (m.editing) {
+      const url = `/projects/${pid}/points/${encodeURIComponent(m.editing)}`;
+      pt = await api("PATCH", url, { rays: m.rays, code, description });
+      if (excluded.length) pt = await api("PATCH", url, { excluded });
+    } else {
+      pt = await api("POST", `/projects/${pid}/points`, { code, description, rays: m.rays, excluded });
+    }
+    endMeasure();
+    await refreshProjectData();
+    selectPoint(pt.id, false);
+    const r = pt.record || {};
+    message(pt.status === "solved"
+      ? `Stored ${pt.id}: ${r.crs ? `E ${fixed(r.easting)} N ${fixed(r.northing)} H ${fixed(r.height)}` : `lon ${fixed(r.lon, 8)} lat ${fixed(r.lat, 8)} h ${fixed(r.h_wgs84)}`}`
+      : `Stored ${pt.id}, but it could not be solved: ${pt.error}`, pt.status !== "solved");
+  } catch (exc) {
+    fail(exc);
+  }
+}
+
+function toggleExcludeLive(i) {
+  const m = state.measure;
+  if (m.excluded.has(i)) m.excluded.delete(i); else m.excluded.add(i);
+  solveLive();
+}
+
+function confScale() { return state.conf === "95" ? SCALE_95_3D : 1; }
+
+function ellipsoidNote(radii) {
+  const what = state.conf === "95"
+    ? "95 % confidence ellipsoid (3-D: 2.7955 σ on each principal axis)"
+    : "1σ ellipsoid (holds only 19.9 % of the probability in 3-D; 95 % is 2.7955× larger)";
+  if (!radii || !radii.every(Number.isFinite)) return `Drawn: ${what}.`;
+  return `Drawn at true size: ${what}; semi-axes ${radii.map((r) => mm(r)).join(" × ")} mm.`;
+}
+
+function solutionText(res) {
+  const lines = [];
+  if (res.crs) {
+    lines.push(`E ${fixed(res.easting)}  N ${fixed(res.northing)}  H ${fixed(res.height)} m`);
+    lines.push(`   ${res.crs}${res.vertical_datum ? " + " + res.vertical_datum : ""} (${res.height_type || "h"})`);
+    lines.push(`σ E/N/H ${mm(res.sigma_e)} / ${mm(res.sigma_n)} / ${mm(res.sigma_h)} mm (1σ)`);
+  }
+  lines.push(`lon ${fixed(res.lon, 8)}  lat ${fixed(res.lat, 8)}  h ${fixed(res.h_wgs84)} m (WGS 84)`);
+  lines.push(`σ0 ${fixed(res.sigma0, 2)}   rays ${res.n_rays}   max angle ${fixed(res.max_angle_deg, 1)}°   rms ${mm(res.rms_m)} mm`);
+  return lines.join("\n");
+}
+
+function renderMeasure(busy = false) {
+  const m = state.measure;
+  if (!m) return;
+  const res = m.solution;
+  const tbody = $("#ray-table tbody");
+  tbody.replaceChildren(...m.rays.map((ray, i) => {
+    const rr = res && res.rays ? res.rays[i] : null;
+    const excluded = m.excluded.has(i);
+    const outlier = rr && rr.outlier;
+    return h("tr", { class: excluded ? "excluded" : (outlier ? "outlier" : "") },
+      h("td", {}, `${i + 1}${outlier ? " ⚑ outlier" : ""}`),
+      h("td", { class: "num" }, rr ? fixed(rr.residual_px, 2) : "—"),
+      h("td", { class: "num" }, rr ? mm(rr.residual_m) : "—"),
+      h("td", {}, h("button", { onclick: () => toggleExcludeLive(i), title: excluded ? "use this ray again" : "leave this ray out of the solution" }, excluded ? "restore" : "exclude")));
+  }));
+  const live = $("#live-solution");
+  live.classList.remove("error");
+  if (m.error) {
+    live.textContent = m.error;
+    live.classList.add("error");
+  } else if (res) {
+    live.textContent = solutionText(res);
+    if (res.warnings && res.warnings.length) {
+      live.append(h("div", { class: "warn" }, ...res.warnings.map((w) => h("div", {}, `⚠ ${w}`))));
+    }
+  } else {
+    live.textContent = busy ? "solving…" : (m.rays.length < 2 ? `Needs at least 2 rays (${m.rays.length} so far).` : "");
+  }
+  drawCurrent();
+}
+
+function drawCurrent() {
+  draw.clear("current");
+  const m = state.measure;
+  if (!m) return;
+  const res = m.solution;
+  const mmNow = modelMatrix();
+  const pRendered = res ? applyPoint(mmNow, res.point_ecef) : null;
+  let fallbackLen = 50;
+  if (state.tileset) {
+    const bs = state.tileset.boundingSphere;
+    fallbackLen = null;
+    var centre = [bs.center.x, bs.center.y, bs.center.z];
+    var radius = bs.radius;
+  }
+  let radii = null;
+  draw.batch(() => {
+    m.rays.forEach((ray, i) => {
+      const rr = res && res.rays ? res.rays[i] : null;
+      const color = m.excluded.has(i) ? COLORS.excluded : (rr && rr.outlier ? COLORS.outlier : COLORS.ray);
+      const len = pRendered ? norm(sub(pRendered, ray.origin)) * 1.25
+        : (fallbackLen || norm(sub(centre, ray.origin)) + radius);
+      draw.ray("current", ray.origin, ray.direction, len, color, `${i + 1}`);
+    });
+    if (res) {
+      radii = draw.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, confScale(), COLORS.solution);
+      draw.add("current", {
+        position: cart(pRendered),
+        point: { pixelSize: 7, color: COLORS.solution, outlineColor: Cesium.Color.BLACK, outlineWidth: 1,
+          disableDepthTestDistance: Number.POSITIVE_INFINITY },
+      });
+    }
+  });
+  $("#ellipsoid-note").textContent = res ? ellipsoidNote(radii) : "";
+}
+
+// ---------------------------------------------------------------------------------------
+// points
+
+function pointById(id) { return state.points.find((p) => p.id === id); }
+
+function renderPoints() {
+  const tbody = $("#points-table tbody");
+  $("#points-count").textContent = state.points.length ? `(${state.points.length})` : "";
+  const rows = state.points.map((p) => {
+    const r = p.record || {};
+    const grid = r.easting !== null && r.easting !== undefined;
+    const warns = (p.result && p.result.warnings) || [];
+    const flag = p.status !== "solved" ? "✖" : (warns.length ? "⚠" : "");
+    return h("tr", {
+      "data-id": p.id, class: p.id === state.selected ? "selected" : "",
+      title: p.status !== "solved" ? p.error : warns.join("\n"),
+      onclick: () => onPointRowClick(p.id),
+    },
+    h("td", {}, p.id),
+    h("td", {}, p.code || ""),
+    h("td", { class: "num" }, grid ? fixed(r.easting) : fixed(r.lon, 7)),
+    h("td", { class: "num" }, grid ? fixed(r.northing) : fixed(r.lat, 7)),
+    h("td", { class: "num" }, grid ? fixed(r.height) : fixed(r.h_wgs84)),
+    h("td", { class: "num" }, grid ? `${mm(r.sigma_e)}/${mm(r.sigma_n)}/${mm(r.sigma_h)}` : "—"),
+    h("td", { class: "num" }, fixed(r.sigma0, 2)),
+    h("td", { class: "num" }, `${r.n_rays ?? p.rays.length}${p.excluded.length ? `+${p.excluded.length}✕` : ""}`),
+    h("td", { class: flag === "✖" ? "error" : "warn" }, flag));
+  });
+  tbody.replaceChildren(...(rows.length ? rows : [h("tr", {}, h("td", { colspan: 9, class: "muted" }, "No points yet: press M to measure one."))]));
+}
+
+function onPointRowClick(id) {
+  if (state.mode === "line" || state.mode === "polygon") { pickFeaturePoint(id); return; }
+  selectPoint(id, true);
+}
+
+function selectPoint(id, fly) {
+  state.selected = id;
+  renderPoints();
+  renderPointDetail();
+  drawSelected();
+  const p = pointById(id);
+  if (fly && p && p.result) {
+    const pos = cart(applyPoint(modelMatrix(), p.result.point_ecef));
+    viewer.camera.flyToBoundingSphere(new Cesium.BoundingSphere(pos, 1.5), {
+      offset: new Cesium.HeadingPitchRange(viewer.camera.heading, -0.5, 8), duration: 0.8,
+    });
+  }
+}
+
+async function patchPoint(id, body) {
+  try {
+    await api("PATCH", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`, body);
+    await refreshProjectData();
+  } catch (exc) { fail(exc); }
+}
+
+let deleteArmed = null;
+
+async function deletePoint(id, button) {
+  if (deleteArmed !== id) {
+    deleteArmed = id;
+    button.textContent = `Really delete ${id}?`;
+    setTimeout(() => { if (deleteArmed === id) { deleteArmed = null; button.textContent = "Delete"; } }, 4000);
+    return;
+  }
+  deleteArmed = null;
+  try {
+    await api("DELETE", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`);
+    if (state.selected === id) state.selected = null;
+    await refreshProjectData();
+    message(`Deleted ${id}.`);
+  } catch (exc) { fail(exc); }
+}
+
+function renderPointDetail() {
+  const box = $("#point-detail");
+  const p = state.selected ? pointById(state.selected) : null;
+  if (!p) { box.hidden = true; box.replaceChildren(); return; }
+  box.hidden = false;
+  const r = p.record || {};
+  const res = p.result || {};
+  const kv = [];
+  const row = (k, v) => kv.push(h("div", {}, k), h("div", { class: "mono" }, v));
+  row("Point", `${p.id}${p.code ? ` · ${p.code}` : ""}`);
+  if (p.description) row("Description", p.description);
+  if (p.status !== "solved") row("Error", p.error || "not solved");
+  if (r.crs) {
+    row("E / N / H", `${fixed(r.easting)} / ${fixed(r.northing)} / ${fixed(r.height)} m`);
+    row("CRS", `${r.crs}${r.vertical_datum ? " + " + r.vertical_datum : ""} (${r.height_type || ""} height)`);
+    row("σ E/N/H (1σ)", `${mm(r.sigma_e)} / ${mm(r.sigma_n)} / ${mm(r.sigma_h)} mm`);
+    row("95 % ellipse", `${mm(r.ellipse_major_95)} × ${mm(r.ellipse_minor_95)} mm, bearing ${fixed(r.ellipse_bearing_deg, 1)}°`);
+  }
+  if (r.lon !== undefined && r.lon !== null) row("WGS 84", `${fixed(r.lon, 8)}, ${fixed(r.lat, 8)}, h ${fixed(r.h_wgs84)} m`);
+  row("σ0", fixed(r.sigma0, 2));
+  row("Rays", `${r.n_rays ?? "—"} used${p.excluded.length ? `, ${p.excluded.length} excluded` : ""}; max angle ${fixed(r.max_angle_deg, 1)}°`);
+  row("RMS / max res.", `${mm(r.rms_m)} mm / ${fixed(r.max_residual_px, 2)} px`);
+  if (r.operation) row("Operation", `${r.operation}${r.operation_accuracy_m !== null && r.operation_accuracy_m !== undefined ? ` (±${r.operation_accuracy_m} m)` : ""}`);
+  const warns = res.warnings || [];
+  const rays = (res.rays || []).map((rr) => h("tr", { class: rr.excluded ? "excluded" : (rr.outlier ? "outlier" : "") },
+    h("td", {}, `${rr.index + 1}${rr.outlier ? " ⚑" : ""}`),
+    h("td", { class: "num" }, fixed(rr.residual_px, 2)),
+    h("td", { class: "num" }, mm(rr.residual_m)),
+    h("td", {}, h("button", {
+      onclick: () => patchPoint(p.id, rr.excluded ? { restore_ray: rr.index } : { exclude_ray: rr.index }),
+    }, rr.excluded ? "restore" : "exclude"))));
+  const delBtn = h("button", { class: "danger", onclick: (ev) => deletePoint(p.id, ev.currentTarget) }, "Delete");
+  box.replaceChildren(
+    h("div", { class: "kv" }, ...kv),
+    warns.length ? h("div", { class: "warn" }, ...warns.map((w) => h("div", {}, `⚠ ${w}`))) : "",
+    rays.length ? h("table", { class: "grid" }, h("thead", {}, h("tr", {}, h("th", {}, "Ray"), h("th", {}, "res px"), h("th", {}, "res mm"), h("th", {}, ""))), h("tbody", {}, ...rays)) : "",
+    h("div", { class: "buttons" },
+      h("button", { onclick: () => selectPoint(p.id, true) }, "Fly to"),
+      h("button", { onclick: () => startMeasure(p), title: "reopen: add rays to this point" }, "Add rays"),
+      delBtn));
+}
+
+function drawPoints() {
+  draw.clear("points");
+  const mmNow = modelMatrix();
+  draw.batch(() => {
+    for (const p of state.points) {
+      if (!p.result || !p.result.point_ecef) continue;
+      draw.marker("points", p.id, applyPoint(mmNow, p.result.point_ecef),
+        p.id === state.selected ? COLORS.selected : COLORS.point);
+    }
+  });
+}
+
+function drawSelected() {
+  draw.clear("selected");
+  drawPoints();
+  const p = state.selected ? pointById(state.selected) : null;
+  if (!p || !p.result || state.mode === "measure") return;
+  const res = p.result;
+  const mmNow = modelMatrix();
+  const pr = applyPoint(mmNow, res.point_ecef);
+  draw.batch(() => {
+    for (const rr of res.rays || []) {
+      const o = applyPoint(mmNow, rr.origin_ecef);
+      const d = applyDirection(mmNow, rr.direction_ecef);
+      const dn = norm(d);
+      const color = rr.excluded ? COLORS.excluded : (rr.outlier ? COLORS.outlier : COLORS.ray.withAlpha(0.8));
+      draw.ray("selected", o, d.map((x) => x / dn), norm(sub(pr, o)) * 1.1, color, null);
+    }
+    draw.ellipsoid("selected", res.point_ecef, res.cov_ecef, mmNow, confScale(), COLORS.selected);
+  });
+}
+
+// ---------------------------------------------------------------------------------------
+// lines and polygons
+
+function startFeature(kind) {
+  if (!state.project) { message("Open a project first.", true); return; }
+  if (state.mode === "measure") { message("Finish or cancel the point first (Enter / Esc).", true); return; }
+  state.mode = kind;
+  state.feature = { kind, points: [] };
+  $("#feature-panel").hidden = false;
+  $("#feature-title").textContent = `New ${kind}`;
+  $("#feat-code").value = "";
+  $(kind === "line" ? "#btn-line" : "#btn-polygon").classList.add("active");
+  renderFeatureDraft();
+  updateStatus();
+}
+
+function cancelFeature() {
+  state.mode = "idle";
+  state.feature = null;
+  $("#feature-panel").hidden = true;
+  $("#btn-line").classList.remove("active");
+  $("#btn-polygon").classList.remove("active");
+  draw.clear("draft");
+  updateStatus();
+}
+
+function pickFeaturePoint(id) {
+  const f = state.feature;
+  const p = pointById(id);
+  if (!p || !p.result) { message(`${id} has no solved position.`, true); return; }
+  if (f.points[f.points.length - 1] === id) return;
+  if (f.kind === "polygon" && f.points.includes(id)) { message(`${id} is already a vertex.`); return; }
+  f.points.push(id);
+  renderFeatureDraft();
+  updateStatus();
+}
+
+function renderFeatureDraft() {
+  const f = state.feature;
+  $("#feature-points").textContent = f.points.length ? f.points.join(" → ") : "click measured points…";
+  draw.clear("draft");
+  const mmNow = modelMatrix();
+  const pos = f.points.map((id) => applyPoint(mmNow, pointById(id).result.point_ecef));
+  draw.path("draft", pos, COLORS.draft, f.kind === "polygon", 2);
+}
+
+async function finishFeature() {
+  const f = state.feature;
+  const need = f.kind === "line" ? 2 : 3;
+  if (f.points.length < need) { message(`A ${f.kind} needs at least ${need} points.`, true); return; }
+  const plural = f.kind === "line" ? "lines" : "polygons";
+  try {
+    const made = await api("POST", `/projects/${encodeURIComponent(state.project.id)}/${plural}`,
+      { points: f.points, code: $("#feat-code").value.trim() });
+    cancelFeature();
+    await refreshProjectData();
+    message(`Stored ${f.kind} ${made.id}: ${measuresText(made.measures)}`);
+  } catch (exc) { fail(exc); }
+}
+
+function measuresText(ms) {
+  if (!ms) return "—";
+  if (ms.error) return ms.error;
+  const parts = [];
+  for (const [k, v] of Object.entries(ms)) {
+    if (typeof v !== "number" || k.startsWith("sigma")) continue;
+    const sig = ms[`sigma_${k}`];
+    const val = k.includes("area") ? area(v) : (/length|perimeter/.test(k) ? length(v) : fixed(v));
+    parts.push(`${k.replace(/_/g, " ")} ${val}${typeof sig === "number" ? ` ± ${k.includes("area") ? area(sig) : length(sig)}` : ""}`);
+  }
+  return parts.join(", ") || "—";
+}
+
+async function deleteFeature(kind, id) {
+  const plural = kind === "line" ? "lines" : "polygons";
+  try {
+    await api("DELETE", `/projects/${encodeURIComponent(state.project.id)}/${plural}/${encodeURIComponent(id)}`);
+    await refreshProjectData();
+  } catch (exc) { fail(exc); }
+}
+
+function renderFeatures() {
+  const rows = [...state.lines.map((f) => ["line", f]), ...state.polygons.map((f) => ["polygon", f])]
+    .map(([kind, f]) => h("tr", {},
+      h("td", {}, `${f.id}`, h("span", { class: "muted" }, kind === "line" ? " line" : " polygon")),
+      h("td", {}, f.points.join(kind === "line" ? "→" : ",")),
+      h("td", { style: "white-space: normal" }, measuresText(f.measures)),
+      h("td", {}, h("button", { onclick: () => deleteFeature(kind, f.id), title: `delete ${f.id}` }, "✕"))));
+  $("#features-table tbody").replaceChildren(...(rows.length ? rows
+    : [h("tr", {}, h("td", { colspan: 4, class: "muted" }, "None yet: L or P, then click measured points."))]));
+}
+
+function drawFeatures() {
+  draw.clear("features");
+  const mmNow = modelMatrix();
+  const posOf = (id) => {
+    const p = pointById(id);
+    return p && p.result ? applyPoint(mmNow, p.result.point_ecef) : null;
+  };
+  draw.batch(() => {
+    for (const f of state.lines) draw.path("features", f.points.map(posOf).filter(Boolean), COLORS.line, false);
+    for (const f of state.polygons) draw.path("features", f.points.map(posOf).filter(Boolean), COLORS.polygon, true);
+  });
+}
+
+// ---------------------------------------------------------------------------------------
+// check points and accuracy
+
+async function importCheckPoints(ev) {
+  ev.preventDefault();
+  if (!state.project) { message("Open a project first.", true); return; }
+  const file = $("#check-file").files[0];
+  if (!file) { message("Choose a CSV, GeoJSON or GeoPackage file of check points.", true); return; }
+  const form = new FormData();
+  form.append("file", file, file.name);
+  const crs = $("#check-crs").value.trim() || (file.name.toLowerCase().endsWith(".csv") ? state.project.crs : "");
+  if (crs) form.append("crs", crs);
+  form.append("replace", $("#check-replace").checked ? "true" : "false");
+  try {
+    const r = await api("POST", `/projects/${encodeURIComponent(state.project.id)}/checkpoints/import`, form);
+    message(`Imported ${r.imported} check points (${r.crs}).`);
+    await refreshProjectData();
+  } catch (exc) { fail(exc); }
+}
+
+async function loadAccuracy() {
+  const box = $("#accuracy");
+  if (!state.project.crs) {
+    box.replaceChildren(h("p", { class: "note" }, `${state.checkPoints} check points; set a grid CRS to compare.`));
+    return;
+  }
+  try {
+    const acc = await api("GET", `/projects/${encodeURIComponent(state.project.id)}/accuracy`);
+    const s = acc.statistics;
+    const rows = acc.points.map((d) => h("tr", {},
+      h("td", {}, d.id), h("td", { class: "num" }, mm(d.dE)), h("td", { class: "num" }, mm(d.dN)),
+      h("td", { class: "num" }, mm(d.dH)), h("td", { class: "num" }, mm(d.d3D))));
+    const c = acc.counts;
+    box.replaceChildren(
+      h("table", { class: "grid", id: "accuracy-table" },
+        h("thead", {}, h("tr", {}, h("th", {}, "Point"), h("th", {}, "dE mm"), h("th", {}, "dN mm"), h("th", {}, "dH mm"), h("th", {}, "d3D mm"))),
+        h("tbody", {}, ...rows)),
+      h("div", { class: "solution", id: "accuracy-summary" },
+        `RMSE E ${mm(s.RMSE_E)}  N ${mm(s.RMSE_N)}  H(horiz.) ${mm(s.RMSE_H)}  V ${mm(s.RMSE_V)}  3D ${mm(s.RMSE_3D)} mm\n`
+        + `ME   E ${mm(s.ME_E)}  N ${mm(s.ME_N)}  V ${mm(s.ME_V)} mm;  SD E ${mm(s.SD_E)}  N ${mm(s.SD_N)}  V ${mm(s.SD_V)} mm\n`
+        + `${c.matched} of ${c.check_points} check points measured`
+        + (c.check_points_not_measured.length ? ` (not measured: ${c.check_points_not_measured.join(", ")})` : "")),
+      h("p", { class: "note" }, `${acc.units}. ${acc.heights}.`));
+  } catch (exc) {
+    box.replaceChildren(h("p", { class: "error" }, exc.message));
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// export
+
+async function exportAs(fmt) {
+  if (!state.project) { message("Open a project first.", true); return; }
+  try {
+    const name = await download(`/projects/${encodeURIComponent(state.project.id)}/export?format=${fmt}`,
+      `${state.project.id}.${fmt}`);
+    message(`Downloaded ${name}.`);
+  } catch (exc) { fail(exc); }
+}
+
+// ---------------------------------------------------------------------------------------
+// rendering all, modelMatrix watch
+
+function renderAll() {
+  renderProjectSelect();
+  renderProjectInfo();
+  if (state.selected && !pointById(state.selected)) state.selected = null;
+  renderPoints();
+  renderPointDetail();
+  renderFeatures();
+  redrawAll();
+  updateStatus();
+}
+
+function redrawAll() {
+  drawSelected();
+  drawFeatures();
+  if (state.mode === "measure") drawCurrent();
+  if (state.feature) renderFeatureDraft();
+}
+
+let lastModelMatrix = IDENTITY16.slice();
+viewer.scene.postRender.addEventListener(() => {
+  if (!state.tileset) return;
+  const now = modelMatrix();
+  if (now.some((v, i) => v !== lastModelMatrix[i])) {
+    lastModelMatrix = now;
+    redrawAll();
+  }
+});
+
+// ---------------------------------------------------------------------------------------
+// input
+
+const clicks = new Cesium.ScreenSpaceEventHandler(viewer.scene.canvas);
+clicks.setInputAction((ev) => {
+  if (state.mode === "measure") { addRay(ev.position); return; }
+  const picked = viewer.scene.pick(ev.position);
+  const id = picked && picked.id && typeof picked.id.id === "string" && picked.id.id.startsWith("pt:")
+    ? picked.id.id.slice(3) : null;
+  if (state.mode === "line" || state.mode === "polygon") {
+    if (id) pickFeaturePoint(id);
+    else message("Click on a point marker (or a row of the points list).");
+    return;
+  }
+  if (id) selectPoint(id, false);
+}, Cesium.ScreenSpaceEventType.LEFT_CLICK);
+
+function toggleHelp(show) {
+  const el = $("#help");
+  el.hidden = show === undefined ? !el.hidden : !show;
+}
+
+document.addEventListener("keydown", (ev) => {
+  if (ev.ctrlKey || ev.altKey || ev.metaKey) return;
+  const t = ev.target;
+  const typing = t && (t.tagName === "INPUT" || t.tagName === "TEXTAREA" || t.tagName === "SELECT");
+  if (!$("#help").hidden) {
+    if (ev.key === "Escape" || ev.key === "?" || ev.key === "h" || ev.key === "H") { toggleHelp(false); ev.preventDefault(); }
+    return;
+  }
+  if (!$("#project-dialog").hidden) {
+    if (ev.key === "Escape") { $("#project-dialog").hidden = true; ev.preventDefault(); }
+    return;
+  }
+  const inPanel = typing && (t.id === "pt-code" || t.id === "pt-desc" || t.id === "feat-code");
+  if (typing && !(inPanel && (ev.key === "Enter" || ev.key === "Escape"))) return;
+  const key = ev.key;
+  if (state.mode === "measure") {
+    if (key === "Enter") { finishMeasure(); ev.preventDefault(); return; }
+    if (key === "Escape") { endMeasure(); message("Point cancelled."); ev.preventDefault(); return; }
+    if (key === "Backspace") { removeLastRay(); ev.preventDefault(); return; }
+  } else if (state.mode === "line" || state.mode === "polygon") {
+    if (key === "Enter") { finishFeature(); ev.preventDefault(); return; }
+    if (key === "Escape") { cancelFeature(); ev.preventDefault(); return; }
+    if (key === "Backspace") {
+      state.feature.points.pop(); renderFeatureDraft(); updateStatus(); ev.preventDefault(); return;
+    }
+  }
+  if (key === "m" || key === "M") { startMeasure(); ev.preventDefault(); }
+  else if (key === "l" || key === "L") { startFeature("line"); ev.preventDefault(); }
+  else if (key === "p" || key === "P") { startFeature("polygon"); ev.preventDefault(); }
+  else if (key === "e" || key === "E") { setConf(state.conf === "95" ? "1" : "95"); ev.preventDefault(); }
+  else if (key === "?" || key === "h" || key === "H") { toggleHelp(true); ev.preventDefault(); }
+  else if (key === "Escape" && state.selected) { selectPoint(null, false); }
+});
+
+function setConf(value) {
+  state.conf = value;
+  document.querySelectorAll("input[name=conf]").forEach((r) => { r.checked = r.value === value; });
+  redrawAll();
+}
+
+function wire() {
+  $("#btn-measure").addEventListener("click", () => { startMeasure(); $("#btn-measure").blur(); });
+  $("#btn-line").addEventListener("click", () => { startFeature("line"); $("#btn-line").blur(); });
+  $("#btn-polygon").addEventListener("click", () => { startFeature("polygon"); $("#btn-polygon").blur(); });
+  $("#btn-finish").addEventListener("click", () => finishMeasure());
+  $("#btn-undo").addEventListener("click", () => removeLastRay());
+  $("#btn-cancel").addEventListener("click", () => endMeasure());
+  $("#btn-feat-finish").addEventListener("click", () => finishFeature());
+  $("#btn-feat-undo").addEventListener("click", () => { state.feature.points.pop(); renderFeatureDraft(); updateStatus(); });
+  $("#btn-feat-cancel").addEventListener("click", () => cancelFeature());
+  $("#btn-help").addEventListener("click", () => toggleHelp(true));
+  $("#btn-help-close").addEventListener("click", () => toggleHelp(false));
+  $("#help").addEventListener("click", (ev) => { if (ev.target.id === "help") toggleHelp(false); });
+  $("#btn-new-project").addEventListener("click", () => openProjectDialog("new"));
+  $("#btn-settings").addEventListener("click", () => openProjectDialog("edit"));
+  $("#pf-cancel").addEventListener("click", () => { $("#project-dialog").hidden = true; });
+  $("#project-form").addEventListener("submit", submitProject);
+  $("#pf-crs-q").addEventListener("input", () => { clearTimeout(crsTimer); crsTimer = setTimeout(searchCrs, 250); });
+  $("#pf-crs-q").addEventListener("keydown", (ev) => { if (ev.key === "Enter") { ev.preventDefault(); searchCrs(); } });
+  $("#scene-select").addEventListener("change", (ev) => loadScene(ev.target.value).catch(fail));
+  $("#project-select").addEventListener("change", (ev) => openProject(ev.target.value).catch(fail));
+  document.querySelectorAll("input[name=conf]").forEach((r) => r.addEventListener("change", () => setConf(r.value)));
+  document.querySelectorAll("[data-export]").forEach((b) => b.addEventListener("click", () => exportAs(b.dataset.export)));
+  $("#check-form").addEventListener("submit", importCheckPoints);
+}
+
+// ---------------------------------------------------------------------------------------
+// start
+
+async function start() {
+  wire();
+  updateStatus();
+  const params = new URLSearchParams(location.search);
+  try {
+    await Promise.all([loadScenes(), loadProjects()]);
+  } catch (exc) {
+    fail(exc);
+    $("#status").textContent = `The gsgeo API does not answer: ${exc.message}`;
+    return;
+  }
+  const pid = params.get("project");
+  const project = pid ? state.projects.find((p) => p.id === pid) : null;
+  const sceneName = params.get("scene") || (project && project.scene) || (state.scenes[0] && state.scenes[0].name);
+  if (sceneName) await loadScene(sceneName);
+  else await loadScene(null);
+  if (project) await openProject(project.id);
+  else if (pid) message(`There is no project '${pid}'.`, true);
+  renderAll();
+  window.gsgeo.ready = true;
+}
+
+start().catch(fail);
