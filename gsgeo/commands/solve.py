@@ -13,6 +13,8 @@ import sys
 
 from gsgeo.crs.pipeline import MeasurementFailure, measure_session
 from gsgeo.errors import GsgeoError, InputError
+from gsgeo.export.writer import FORMATS as EXPORT_FORMATS
+from gsgeo.export.writer import write_session_results
 from gsgeo.session import Session, load_session, ray_arrays
 from gsgeo.solve import SCALE_95_1D, intersect
 
@@ -39,6 +41,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma-px", type=float, default=None,
                    help="a-priori aiming precision in pixels (overrides the session's sigma_px)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("-o", "--output", default=None, metavar="OUT.gpkg|OUT.geojson|OUT.csv",
+                   help="also export points, rays, lines and polygons (format from the suffix; "
+                        "needs a grid CRS); written atomically")
+    p.add_argument("--export-format", default=None, choices=EXPORT_FORMATS,
+                   help="override the suffix; geojson-grid = legacy grid GeoJSON, not RFC 7946")
     p.set_defaults(run=run)
 
 
@@ -136,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_grid(args, session, crs)
     if getattr(args, "vertical", None) or getattr(args, "geoid", None):
         raise InputError("--vertical / --geoid need a grid CRS: give --crs (e.g. EPSG:27700)")
+    if getattr(args, "output", None):
+        raise InputError("-o/--output needs a grid CRS: give --crs (e.g. EPSG:27700)")
     results = solve_session(session)
     if args.json:
         json.dump({"points": results}, sys.stdout, indent=2)
@@ -161,6 +170,9 @@ def _run_grid(args: argparse.Namespace, session: Session, crs: str) -> int:
         print(table)
     for w in warnings:
         print(f"gsgeo solve: warning: {w}", file=sys.stderr)
+    if getattr(args, "output", None):
+        out = write_session_results(args.output, results, session, fmt=args.export_format)
+        print(f"gsgeo solve: wrote {out}", file=sys.stderr)
     failed = [m.point_id for m in results if isinstance(m, MeasurementFailure)]
     if failed:
         print(f"gsgeo solve: {len(failed)} point(s) could not be solved: {', '.join(failed)}",

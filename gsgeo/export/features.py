@@ -137,8 +137,8 @@ def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 def _on_segment(a, b, c) -> np.ndarray:
     """c within the bounding box of segment a-b (for collinear points)."""
-    return ((np.minimum(a[..., 0], b[..., 0]) <= c[..., 0]) & (c[..., 0] <= np.maximum(a[..., 0], b[..., 0]))
-            & (np.minimum(a[..., 1], b[..., 1]) <= c[..., 1]) & (c[..., 1] <= np.maximum(a[..., 1], b[..., 1])))
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    return np.all((lo <= c) & (c <= hi), axis=-1)
 
 
 def ring_self_intersection(xy: np.ndarray) -> tuple[int, int] | None:

@@ -1,0 +1,372 @@
+"""What an export holds, as column arrays: points, rays, lines, polygons, error ellipses, check points.
+
+`collect` turns measurements (gsgeo.crs.pipeline.Measurement objects, or their ``to_dict()``
+JSON as the project store keeps it) plus lines and polygons given by point ids into an
+`ExportData` that the GeoPackage, GeoJSON and CSV writers share, so every format carries the
+same numbers. Everything is validated here, before a file is touched.
+
+Coordinates are in the grid CRS of the measurements (E, N, H in the CRS's units); sigmas and
+covariances in metres and m²; lengths and areas in metres and m² (gsgeo.export.features).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gsgeo.crs.pipeline import RECORD_KEYS
+from gsgeo.crs.resolve import grid_crs, parse_crs
+from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.export.features import line_measures, polygon_measures
+
+#: Column types of the point schema (DESIGN.md, "Point schema"): 'str', 'float' or 'int'.
+POINT_TYPES: dict[str, str] = {k: "float" for k in RECORD_KEYS}
+POINT_TYPES.update(dict.fromkeys(
+    ("point_id", "code", "description", "height_type", "vertical_datum", "crs", "operation",
+     "measured_at"), "str"))
+POINT_TYPES["n_rays"] = "int"
+
+#: Vertices of an error-ellipse polygon (closed ring: one more).
+ELLIPSE_VERTICES = 72
+
+
+@dataclass
+class Table:
+    """Named columns of equal length: numpy float/int/bool arrays or object arrays of str/None."""
+
+    columns: dict[str, np.ndarray]
+    types: dict[str, str]  # name -> 'str' | 'float' | 'int' | 'bool'
+
+    def __len__(self) -> int:
+        return len(next(iter(self.columns.values()))) if self.columns else 0
+
+
+@dataclass
+class ExportData:
+    """Everything an export writes. Geometry arrays are in the grid CRS (E, N, H)."""
+
+    crs: str  # as the measurements state it, e.g. 'EPSG:27700' or 'EPSG:27700+5701'
+    horizontal_crs: str  # the projected part, for 2-D layers
+    height_type: str
+    vertical_datum: str
+    points: Table
+    point_xyz: np.ndarray  # (M, 3)
+    point_llh: np.ndarray  # (M, 3) WGS 84 lon, lat (degrees), ellipsoidal height (m)
+    rays: Table | None = None
+    ray_xyz: np.ndarray | None = None  # (R, 2, 3) camera centre -> point
+    lines: Table | None = None
+    line_index: list[np.ndarray] = field(default_factory=list)  # point indices per line
+    polygons: Table | None = None
+    polygon_index: list[np.ndarray] = field(default_factory=list)  # ring, counterclockwise in E, N
+    ellipses: Table | None = None
+    ellipse_xy: np.ndarray | None = None  # (M', V + 1, 2) closed rings
+    check_points: Table | None = None
+    check_xyz: np.ndarray | None = None  # (C, 3), NaN height where unknown
+
+
+def _get(obj: Any, key: str, default: Any = None) -> Any:
+    if isinstance(obj, Mapping):
+        return obj.get(key, default)
+    return getattr(obj, key, default)
+
+
+def _is_failure(m: Any) -> bool:
+    if isinstance(m, Mapping):
+        return "error" in m and "point_id" in m and m.get("easting") is None and "rays" not in m
+    return type(m).__name__ == "MeasurementFailure"
+
+
+def _record(m: Any) -> dict:
+    if isinstance(m, Mapping):
+        missing = [k for k in RECORD_KEYS if k not in m]
+        if missing:
+            raise InputError(
+                f"measurement {m.get('point_id', '?')!r}: not a point-schema record "
+                f"(missing {', '.join(missing[:4])}{'...' if len(missing) > 4 else ''})")
+        return m
+    if not hasattr(m, "record"):
+        raise InputError(f"cannot export {type(m).__name__}: expected gsgeo.crs Measurement objects")
+    return m.record()
+
+
+def _column(values: list, kind: str, name: str) -> np.ndarray:
+    if kind == "str":
+        return np.array([None if v is None else str(v) for v in values], dtype=object)
+    if kind == "int":
+        return np.array(values, dtype=np.int32)
+    try:
+        return np.array([math.nan if v is None else v for v in values], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"column {name}: expected numbers") from None
+
+
+def _rays(m: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray] | None:
+    """Camera centres in the grid (N, 3), residuals px / m, outlier, excluded flags; None if absent."""
+    if isinstance(m, Mapping):
+        rays = m.get("rays") or []
+        if not rays or any(r.get("origin_grid") is None for r in rays):
+            return None
+        org = np.array([r["origin_grid"] for r in rays], dtype=np.float64)
+        px = np.array([math.nan if r.get("residual_px") is None else r["residual_px"] for r in rays])
+        rm = np.array([math.nan if r.get("residual_m") is None else r["residual_m"] for r in rays])
+        out = np.array([bool(r.get("outlier")) for r in rays])
+        exc = np.array([bool(r.get("excluded")) for r in rays])
+        return org, px, rm, out, exc
+    org = getattr(m, "ray_origins_grid", None)
+    if org is None:
+        return None
+    n = org.shape[0]
+    px = m.residuals_px if m.residuals_px is not None else np.full(n, math.nan)
+    rm = m.residuals_m if m.residuals_m is not None else np.full(n, math.nan)
+    out = m.outliers if m.outliers is not None else np.zeros(n, dtype=bool)
+    return org, px, rm, out, np.asarray(m.excluded, dtype=bool)
+
+
+def _feature_parts(item: Any, kind: str, i: int) -> tuple[str, list[str]]:
+    """(id, point ids) of a line/polygon given as session Feature, store record, dict or tuple."""
+    if isinstance(item, (tuple, list)) and len(item) == 2 and isinstance(item[1], (list, tuple)):
+        fid, pids = item
+    else:
+        fid = _get(item, "id")
+        pids = _get(item, "points")
+        if pids is None:
+            pids = _get(item, "point_ids")
+    if fid is None or pids is None or isinstance(pids, str):
+        raise InputError(f"{kind}s[{i}]: expected an id and a list of point ids")
+    return str(fid), [str(p) for p in pids]
+
+
+def _resolve(kind: str, fid: str, pids: list[str], index: dict[str, int],
+             failed: dict[str, str]) -> np.ndarray:
+    out = []
+    for p in pids:
+        if p in index:
+            out.append(index[p])
+        elif p in failed:
+            raise InputError(f"{kind} '{fid}': point '{p}' was not solved ({failed[p]})")
+        else:
+            raise InputError(f"{kind} '{fid}': unknown point id '{p}'")
+    return np.array(out, dtype=np.int64)
+
+
+def ellipse_rings(e, n, major, minor, bearing_deg, unit_m: float = 1.0,
+                  vertices: int = ELLIPSE_VERTICES) -> np.ndarray:
+    """Closed counterclockwise rings (M, vertices + 1, 2) of ellipses in (E, N).
+
+    Semi-axes in metres (divided by unit_m for the CRS's units), bearing of the major axis in
+    degrees clockwise from grid north.
+    """
+    b = np.radians(np.asarray(bearing_deg, dtype=np.float64))[:, None]
+    t = np.linspace(0.0, 2 * np.pi, vertices, endpoint=False)[None, :]
+    a_ = np.asarray(major)[:, None] / unit_m * np.cos(t)
+    b_ = np.asarray(minor)[:, None] / unit_m * np.sin(t)
+    # Major axis u = (sin b, cos b); v = (-cos b, sin b) makes (u, v) counterclockwise.
+    x = np.asarray(e)[:, None] + a_ * np.sin(b) - b_ * np.cos(b)
+    y = np.asarray(n)[:, None] + a_ * np.cos(b) + b_ * np.sin(b)
+    ring = np.stack([x, y], axis=-1)
+    return np.concatenate([ring, ring[:, :1]], axis=1)
+
+
+def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
+            polygons: Iterable[Any] = (), check_points: Iterable[Any] = ()) -> ExportData:
+    """Validate and gather everything an export writes (see module docstring).
+
+    Raises InputError (nothing measured, unknown or unsolved point ids, malformed input),
+    GeometryError (a bad line or polygon, prefixed with its id) or CRSError (no grid CRS, or
+    measurements in different CRSs).
+    """
+    items = list(measurements)
+    failed = {str(_get(m, "point_id")): str(_get(m, "error")) for m in items if _is_failure(m)}
+    solved = [m for m in items if not _is_failure(m)]
+    if not solved:
+        why = f" ({len(failed)} point(s) could not be solved)" if failed else ""
+        raise InputError(f"nothing to export: no measured points{why}")
+    recs = [_record(m) for m in solved]
+    no_grid = [r["point_id"] for r in recs if r.get("easting") is None or r.get("crs") is None]
+    if no_grid:
+        raise CRSError(
+            f"cannot export without grid coordinates (point '{no_grid[0]}' has none): solve with "
+            "a projected CRS, e.g. --crs EPSG:27700")
+    first = recs[0]
+    for key in ("crs", "height_type", "vertical_datum"):
+        other = next((r for r in recs if r[key] != first[key]), None)
+        if other is not None:
+            raise CRSError(
+                f"points '{first['point_id']}' and '{other['point_id']}' differ in {key} "
+                f"({first[key]!r} vs {other[key]!r}); one export holds one CRS")
+    ids = [str(r["point_id"]) for r in recs]
+    index: dict[str, int] = {}
+    for i, pid in enumerate(ids):
+        if pid in index:
+            raise InputError(f"duplicate point id '{pid}' in the measurements")
+        index[pid] = i
+    try:
+        g = grid_crs(first["crs"])
+    except CRSError as exc:
+        raise CRSError(f"the measurements' CRS cannot be used for export: {exc}") from None
+    crs_text = str(first["crs"])
+
+    cols = {k: _column([r[k] for r in recs], POINT_TYPES[k], k) for k in RECORD_KEYS}
+    points = Table(cols, dict(POINT_TYPES))
+    xyz = np.column_stack([cols["easting"], cols["northing"], cols["height"]])
+    llh = np.column_stack([cols["lon"], cols["lat"], cols["h_wgs84"]])
+    if not np.all(np.isfinite(xyz)):
+        bad = ids[int(np.flatnonzero(~np.all(np.isfinite(xyz), axis=1))[0])]
+        raise InputError(f"point '{bad}': easting, northing or height is not a finite number")
+    cov = np.empty((len(recs), 3, 3))
+    for (a, b), k in zip(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
+                         ("cov_ee", "cov_en", "cov_eh", "cov_nn", "cov_nh", "cov_hh"), strict=True):
+        cov[:, a, b] = cov[:, b, a] = cols[k]
+
+    data = ExportData(crs=crs_text, horizontal_crs=g.id, height_type=str(first["height_type"]),
+                      vertical_datum=str(first["vertical_datum"]), points=points,
+                      point_xyz=xyz, point_llh=llh)
+    _collect_rays(data, solved, xyz, ids)
+    _collect_features(data, lines, polygons, index, failed, ids, xyz, cov, g)
+    ok = np.isfinite(cols["ellipse_major_95"]) & np.isfinite(cols["ellipse_minor_95"])
+    if ok.any():
+        sel = np.flatnonzero(ok)
+        data.ellipses = Table({
+            "point_id": cols["point_id"][sel],
+            "ellipse_major_95": cols["ellipse_major_95"][sel],
+            "ellipse_minor_95": cols["ellipse_minor_95"][sel],
+            "ellipse_bearing_deg": cols["ellipse_bearing_deg"][sel],
+        }, {"point_id": "str", "ellipse_major_95": "float", "ellipse_minor_95": "float",
+            "ellipse_bearing_deg": "float"})
+        data.ellipse_xy = ellipse_rings(xyz[sel, 0], xyz[sel, 1], cols["ellipse_major_95"][sel],
+                                        cols["ellipse_minor_95"][sel],
+                                        np.nan_to_num(cols["ellipse_bearing_deg"][sel]),
+                                        g.unit_factor)
+    _collect_check_points(data, check_points, index, xyz, g)
+    return data
+
+
+def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str]) -> None:
+    parts = [(i, r) for i, m in enumerate(solved) if (r := _rays(m)) is not None]
+    if not parts:
+        return
+    counts = np.array([r[0].shape[0] for _, r in parts])
+    owner = np.repeat(np.array([i for i, _ in parts]), counts)
+    org = np.concatenate([r[0] for _, r in parts])
+    seg = np.stack([org, xyz[owner]], axis=1)
+    d = seg[:, 1] - seg[:, 0]
+    pid = np.array(ids, dtype=object)[owner]
+    data.ray_xyz = seg
+    data.rays = Table({
+        "point_id": pid,
+        "ray_index": np.concatenate([np.arange(c, dtype=np.int32) for c in counts]),
+        "residual_px": np.concatenate([np.asarray(r[1], dtype=float) for _, r in parts]),
+        "residual_m": np.concatenate([np.asarray(r[2], dtype=float) for _, r in parts]),
+        "outlier": np.concatenate([np.asarray(r[3], dtype=bool) for _, r in parts]),
+        "excluded": np.concatenate([np.asarray(r[4], dtype=bool) for _, r in parts]),
+        "range_grid": np.sqrt(np.einsum("ki,ki->k", d, d)),
+    }, {"point_id": "str", "ray_index": "int", "residual_px": "float", "residual_m": "float",
+        "outlier": "bool", "excluded": "bool", "range_grid": "float"})
+
+
+def _ids_text(pids: Sequence[str]) -> str:
+    return json.dumps(list(pids), ensure_ascii=False)
+
+
+def _collect_features(data, lines, polygons, index, failed, ids, xyz, cov, g) -> None:
+    unit, vunit = g.unit_factor, g.vertical_unit_factor
+    seen: set[str] = set()
+    rows = []
+    for i, item in enumerate(lines):
+        fid, pids = _feature_parts(item, "line", i)
+        if fid in seen:
+            raise InputError(f"duplicate line id '{fid}'")
+        seen.add(fid)
+        idx = _resolve("line", fid, pids, index, failed)
+        try:
+            m = line_measures(xyz[idx], cov[idx], pids, unit_m=unit, vertical_unit_m=vunit)
+        except GsgeoError as exc:
+            raise type(exc)(f"line '{fid}': {exc}") from None
+        rows.append((fid, pids, m))
+        data.line_index.append(idx)
+    if rows:
+        data.lines = Table({
+            "line_id": np.array([r[0] for r in rows], dtype=object),
+            "point_ids": np.array([_ids_text(r[1]) for r in rows], dtype=object),
+            "n_points": np.array([r[2].n_points for r in rows], dtype=np.int32),
+            "length_3d": _column([r[2].length_3d for r in rows], "float", "length_3d"),
+            "sigma_length_3d": _column([r[2].sigma_length_3d for r in rows], "float", ""),
+            "length_2d": np.array([r[2].length_2d for r in rows]),
+            "sigma_length_2d": _column([r[2].sigma_length_2d for r in rows], "float", ""),
+        }, {"line_id": "str", "point_ids": "str", "n_points": "int", "length_3d": "float",
+            "sigma_length_3d": "float", "length_2d": "float", "sigma_length_2d": "float"})
+    seen = set()
+    rows = []
+    for i, item in enumerate(polygons):
+        fid, pids = _feature_parts(item, "polygon", i)
+        if fid in seen:
+            raise InputError(f"duplicate polygon id '{fid}'")
+        seen.add(fid)
+        if len(pids) > 1 and pids[-1] == pids[0]:
+            pids = pids[:-1]  # closed explicitly; polygons close themselves
+        dup = next((p for j, p in enumerate(pids) if p in pids[:j]), None)
+        if dup is not None:
+            raise InputError(f"polygon '{fid}': point '{dup}' appears more than once")
+        idx = _resolve("polygon", fid, pids, index, failed)
+        try:
+            m = polygon_measures(xyz[idx], cov[idx], pids, unit_m=unit, vertical_unit_m=vunit)
+        except GsgeoError as exc:
+            raise type(exc)(f"polygon '{fid}': {exc}") from None
+        rows.append((fid, pids, m))
+        data.polygon_index.append(idx if m.counterclockwise else idx[::-1])
+    if rows:
+        data.polygons = Table({
+            "polygon_id": np.array([r[0] for r in rows], dtype=object),
+            "point_ids": np.array([_ids_text(r[1]) for r in rows], dtype=object),
+            "n_points": np.array([r[2].n_points for r in rows], dtype=np.int32),
+            "area_2d": np.array([r[2].area_2d for r in rows]),
+            "sigma_area_2d": _column([r[2].sigma_area_2d for r in rows], "float", ""),
+            "perimeter_2d": np.array([r[2].perimeter_2d for r in rows]),
+            "sigma_perimeter_2d": _column([r[2].sigma_perimeter_2d for r in rows], "float", ""),
+        }, {"polygon_id": "str", "point_ids": "str", "n_points": "int", "area_2d": "float",
+            "sigma_area_2d": "float", "perimeter_2d": "float", "sigma_perimeter_2d": "float"})
+
+
+def _collect_check_points(data, check_points, index, xyz, g) -> None:
+    """Check points in the export's grid CRS: id and easting/northing[/height] (or x/y/z)."""
+    rows = []
+    for i, c in enumerate(check_points):
+        cid = _get(c, "point_id", _get(c, "id"))
+        vals = []
+        for names in (("easting", "x"), ("northing", "y"), ("height", "z")):
+            v = next((_get(c, k) for k in names if _get(c, k) is not None), None)
+            vals.append(v)
+        if cid is None or vals[0] is None or vals[1] is None:
+            raise InputError(f"check_points[{i}]: expected an id and easting/northing (x/y)")
+        crs = _get(c, "crs")
+        if crs and not parse_crs(str(crs)).equals(parse_crs(data.crs)) and not \
+                parse_crs(str(crs)).equals(parse_crs(data.horizontal_crs)):
+            raise CRSError(f"check point '{cid}' is in {crs}, the export in {data.crs}; "
+                           "transform the check points first")
+        try:
+            row = [float(v) if v is not None else math.nan for v in vals]
+        except (TypeError, ValueError):
+            raise InputError(f"check point '{cid}': coordinates must be numbers") from None
+        rows.append((str(cid), row))
+    if not rows:
+        return
+    cxyz = np.array([r[1] for r in rows], dtype=np.float64)
+    if not np.all(np.isfinite(cxyz[:, :2])):
+        raise InputError("check points: easting and northing must be finite numbers")
+    match = np.array([index.get(r[0], -1) for r in rows])
+    d = np.full((len(rows), 3), math.nan)
+    has = match >= 0
+    d[has] = xyz[match[has]] - cxyz[has]
+    data.check_xyz = cxyz
+    data.check_points = Table({
+        "point_id": np.array([r[0] for r in rows], dtype=object),
+        "easting": cxyz[:, 0], "northing": cxyz[:, 1], "height": cxyz[:, 2],
+        "measured": has,
+        "d_easting": d[:, 0], "d_northing": d[:, 1], "d_height": d[:, 2],
+    }, {"point_id": "str", "easting": "float", "northing": "float", "height": "float",
+        "measured": "bool", "d_easting": "float", "d_northing": "float", "d_height": "float"})
