@@ -60,6 +60,12 @@ class Candidates:
     unavailable: tuple  # pyproj Operation objects (their grids are missing)
 
 
+# pyproj warns "Best transformation is not available due to missing Grid(...)" when it
+# builds a group; gsgeo reports missing grids itself, by name, where they matter. A filter
+# for exactly that message (catch_warnings would not be thread-safe).
+warnings.filterwarnings("ignore", message="Best transformation is not available",
+                        category=UserWarning)
+
 _local = threading.local()
 #: How many TransformerGroups were built (tests check that points reuse them).
 BUILDS: Counter = Counter()
@@ -73,10 +79,7 @@ def candidates(src: str, dst: str) -> Candidates:
     key = (src, dst, _datadir())
     found = cache.get(key)
     if found is None:
-        with warnings.catch_warnings():
-            # "Best transformation is not available": gsgeo reports this itself, by grid name.
-            warnings.simplefilter("ignore", UserWarning)
-            tg = TransformerGroup(parse_crs(src), parse_crs(dst), always_xy=True)
+        tg = TransformerGroup(parse_crs(src), parse_crs(dst), always_xy=True)
         found = Candidates(tuple(tg.transformers), tuple(tg.unavailable_operations))
         BUILDS["groups"] += 1
         if len(cache) >= 128:
