@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gsgeo.solve.linalg import sym3_inverse_entries
+
 #: Iterations of the angular model at most; ranges change little after the first pass.
 MAX_ITERATIONS = 20
 #: Change of the point, relative to its mean range, at which a point stops iterating
@@ -70,16 +72,7 @@ def _solve(o, d, do, w):
     b0 = wox.sum(axis=0) - (wdx * do).sum(axis=0)
     b1 = woy.sum(axis=0) - (wdy * do).sum(axis=0)
     b2 = woz.sum(axis=0) - (wdz * do).sum(axis=0)
-    c00 = n11 * n22 - n12 * n12
-    c01 = n02 * n12 - n01 * n22
-    c02 = n01 * n12 - n02 * n11
-    c11 = n00 * n22 - n02 * n02
-    c12 = n01 * n02 - n00 * n12
-    c22 = n00 * n11 - n01 * n01
-    det = n00 * c00 + n01 * c01 + n02 * c02
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv_det = 1.0 / det
-    q = (c00 * inv_det, c01 * inv_det, c02 * inv_det, c11 * inv_det, c12 * inv_det, c22 * inv_det)
+    q, _ = sym3_inverse_entries(n00, n01, n02, n11, n12, n22)
     x = q[0] * b0 + q[1] * b1 + q[2] * b2
     y = q[1] * b0 + q[3] * b1 + q[4] * b2
     z = q[2] * b0 + q[4] * b1 + q[5] * b2

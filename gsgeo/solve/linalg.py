@@ -10,6 +10,25 @@ from __future__ import annotations
 import numpy as np
 
 
+def sym3_inverse_entries(n00, n01, n02, n11, n12, n22):
+    """The six unique entries of the inverse of symmetric 3 x 3 matrices, and the determinant.
+
+    Each argument is one entry over any stack shape (arrays or floats); returns
+    ``(i00, i01, i02, i11, i12, i22), det``, non-finite where the determinant is zero.
+    """
+    c00 = n11 * n22 - n12 * n12
+    c01 = n02 * n12 - n01 * n22
+    c02 = n01 * n12 - n02 * n11
+    c11 = n00 * n22 - n02 * n02
+    c12 = n01 * n02 - n00 * n12
+    c22 = n00 * n11 - n01 * n01
+    det = n00 * c00 + n01 * c01 + n02 * c02
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = 1.0 / det
+    return (c00 * inv_det, c01 * inv_det, c02 * inv_det, c11 * inv_det, c12 * inv_det,
+            c22 * inv_det), det
+
+
 def sym3_inverse(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse and determinant of a stack of symmetric 3 x 3 matrices.
 
@@ -22,24 +41,16 @@ def sym3_inverse(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     inverse : array (..., 3, 3); non-finite where the determinant is zero.
     det : array (...).
     """
-    a00, a01, a02 = a[..., 0, 0], a[..., 0, 1], a[..., 0, 2]
-    a11, a12, a22 = a[..., 1, 1], a[..., 1, 2], a[..., 2, 2]
-    c00 = a11 * a22 - a12 * a12
-    c01 = a02 * a12 - a01 * a22
-    c02 = a01 * a12 - a02 * a11
-    c11 = a00 * a22 - a02 * a02
-    c12 = a01 * a02 - a00 * a12
-    c22 = a00 * a11 - a01 * a01
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv_det = 1.0 / det
+    (i00, i01, i02, i11, i12, i22), det = sym3_inverse_entries(
+        a[..., 0, 0], a[..., 0, 1], a[..., 0, 2], a[..., 1, 1], a[..., 1, 2], a[..., 2, 2]
+    )
     out = np.empty(a.shape, dtype=np.float64)
-    out[..., 0, 0] = c00 * inv_det
-    out[..., 0, 1] = out[..., 1, 0] = c01 * inv_det
-    out[..., 0, 2] = out[..., 2, 0] = c02 * inv_det
-    out[..., 1, 1] = c11 * inv_det
-    out[..., 1, 2] = out[..., 2, 1] = c12 * inv_det
-    out[..., 2, 2] = c22 * inv_det
+    out[..., 0, 0] = i00
+    out[..., 0, 1] = out[..., 1, 0] = i01
+    out[..., 0, 2] = out[..., 2, 0] = i02
+    out[..., 1, 1] = i11
+    out[..., 1, 2] = out[..., 2, 1] = i12
+    out[..., 2, 2] = i22
     return out, det
 
 
