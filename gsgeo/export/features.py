@@ -195,14 +195,15 @@ def polygon_measures(xyz, cov=None, ids: Sequence[str] | None = None, *, unit_m:
         ids = None if ids is None else ids[:-1]
     n = p.shape[0]
     xy = p[:, :2] * unit_m
-    distinct = np.unique(xy, axis=0).shape[0]
+    same = np.all(xy[:, None, :] == xy[None, :, :], axis=-1)  # small n: pairwise is cheapest
+    repeat = np.triu(same, k=1).any(axis=0)  # point j equals an earlier point
+    distinct = n - int(repeat.sum())
     if n < 3 or distinct < 3:
         raise GeometryError(
             f"a polygon needs at least 3 distinct points, got {distinct}"
             + (f" (of {n} given)" if n != distinct else ""))
     if distinct < n:
-        _, first, counts = np.unique(xy, axis=0, return_index=True, return_counts=True)
-        k = int(first[np.flatnonzero(counts > 1)[0]])
+        k = int(np.flatnonzero(repeat)[0])
         raise GeometryError(f"the polygon visits {_name(ids, k)} (or its position) more than once")
     hit = ring_self_intersection(xy)
     if hit is not None:

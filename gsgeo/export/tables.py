@@ -94,13 +94,63 @@ def _record(m: Any) -> dict:
     return m.record()
 
 
+def _measurement_columns(ms: list) -> dict[str, Any] | None:
+    """The point-schema columns of Measurement objects without a record() per point.
+
+    Gives exactly what Measurement.record() gives (the export tests compare the two), with
+    the per-point numpy reductions done once over all points. None when an object is not a
+    Measurement with a grid point and covariance (the caller then uses record()).
+    """
+    if not all(hasattr(m, "grid") and hasattr(m, "solution") for m in ms):
+        return None
+    grids = [m.grid for m in ms]
+    if any(g is None or g.covariance is None for g in grids):
+        return None
+    sols = [m.solution for m in ms]
+    cov = np.array([g.covariance for g in grids], dtype=np.float64)
+    kept = [np.asarray(m.excluded, dtype=bool) for m in ms]
+    n_all = np.array([k.shape[0] for k in kept])
+    n_excl = np.add.reduceat(np.concatenate(kept).astype(np.int64), np.cumsum(n_all) - n_all)
+    max_px: list = [None] * len(ms)
+    have = [i for i, s in enumerate(sols) if s.residuals_px is not None]
+    if have:
+        px = [np.asarray(sols[i].residuals_px, dtype=np.float64).ravel() for i in have]
+        lens = np.array([a.shape[0] for a in px])
+        mx = np.maximum.reduceat(np.concatenate(px), np.cumsum(lens) - lens).tolist()
+        for i, v in zip(have, mx, strict=True):
+            max_px[i] = v
+    out: dict[str, Any] = {
+        "point_id": [m.point_id for m in ms], "code": [m.code for m in ms],
+        "description": [m.description for m in ms],
+        "easting": [g.easting for g in grids], "northing": [g.northing for g in grids],
+        "height": [g.height for g in grids], "height_type": [g.height_type for g in grids],
+        "vertical_datum": [g.vertical_datum for g in grids], "crs": [g.crs for g in grids],
+        "sigma_e": [g.sigma_e for g in grids], "sigma_n": [g.sigma_n for g in grids],
+        "sigma_h": [g.sigma_h for g in grids],
+        "ellipse_major_95": [g.ellipse_major_95 for g in grids],
+        "ellipse_minor_95": [g.ellipse_minor_95 for g in grids],
+        "ellipse_bearing_deg": [g.ellipse_bearing_deg for g in grids],
+        "sigma0": [float(s.sigma0) for s in sols], "n_rays": (n_all - n_excl).tolist(),
+        "max_angle_deg": [float(s.max_angle_deg) for s in sols],
+        "rms_m": [float(s.rms_m) for s in sols], "max_residual_px": max_px,
+        "lon": [m.lon for m in ms], "lat": [m.lat for m in ms], "h_wgs84": [m.h_wgs84 for m in ms],
+        "operation": [g.operation for g in grids],
+        "operation_accuracy_m": [g.operation_accuracy_m for g in grids],
+        "measured_at": [m.measured_at for m in ms],
+    }
+    for k, (a, b) in {"cov_ee": (0, 0), "cov_en": (0, 1), "cov_eh": (0, 2), "cov_nn": (1, 1),
+                      "cov_nh": (1, 2), "cov_hh": (2, 2)}.items():
+        out[k] = cov[:, a, b]
+    return out
+
+
 def _column(values: list, kind: str, name: str) -> np.ndarray:
     if kind == "str":
         return np.array([None if v is None else str(v) for v in values], dtype=object)
     if kind == "int":
         return np.array(values, dtype=np.int32)
     try:
-        return np.array([math.nan if v is None else v for v in values], dtype=np.float64)
+        return np.array(values, dtype=np.float64)  # None -> NaN
     except (TypeError, ValueError):
         raise InputError(f"column {name}: expected numbers") from None
 
@@ -186,20 +236,24 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
     if not solved:
         why = f" ({len(failed)} point(s) could not be solved)" if failed else ""
         raise InputError(f"nothing to export: no measured points{why}")
-    recs = [_record(m) for m in solved]
-    no_grid = [r["point_id"] for r in recs if r.get("easting") is None or r.get("crs") is None]
+    raw = _measurement_columns(solved)
+    if raw is None:
+        recs = [_record(m) for m in solved]
+        raw = {k: [r[k] for r in recs] for k in RECORD_KEYS}
+    ids = [str(v) for v in raw["point_id"]]
+    no_grid = [i for i, (e, c) in enumerate(zip(raw["easting"], raw["crs"], strict=True))
+               if e is None or c is None]
     if no_grid:
         raise CRSError(
-            f"cannot export without grid coordinates (point '{no_grid[0]}' has none): solve with "
-            "a projected CRS, e.g. --crs EPSG:27700")
-    first = recs[0]
+            f"cannot export without grid coordinates (point '{ids[no_grid[0]]}' has none): solve "
+            "with a projected CRS, e.g. --crs EPSG:27700")
+    first = {k: raw[k][0] for k in ("point_id", "crs", "height_type", "vertical_datum")}
     for key in ("crs", "height_type", "vertical_datum"):
-        other = next((r for r in recs if r[key] != first[key]), None)
+        other = next((i for i, v in enumerate(raw[key]) if v != first[key]), None)
         if other is not None:
             raise CRSError(
-                f"points '{first['point_id']}' and '{other['point_id']}' differ in {key} "
-                f"({first[key]!r} vs {other[key]!r}); one export holds one CRS")
-    ids = [str(r["point_id"]) for r in recs]
+                f"points '{ids[0]}' and '{ids[other]}' differ in {key} "
+                f"({first[key]!r} vs {raw[key][other]!r}); one export holds one CRS")
     index: dict[str, int] = {}
     for i, pid in enumerate(ids):
         if pid in index:
@@ -211,14 +265,14 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
         raise CRSError(f"the measurements' CRS cannot be used for export: {exc}") from None
     crs_text = str(first["crs"])
 
-    cols = {k: _column([r[k] for r in recs], POINT_TYPES[k], k) for k in RECORD_KEYS}
+    cols = {k: _column(raw[k], POINT_TYPES[k], k) for k in RECORD_KEYS}
     points = Table(cols, dict(POINT_TYPES))
     xyz = np.column_stack([cols["easting"], cols["northing"], cols["height"]])
     llh = np.column_stack([cols["lon"], cols["lat"], cols["h_wgs84"]])
     if not np.all(np.isfinite(xyz)):
         bad = ids[int(np.flatnonzero(~np.all(np.isfinite(xyz), axis=1))[0])]
         raise InputError(f"point '{bad}': easting, northing or height is not a finite number")
-    cov = np.empty((len(recs), 3, 3))
+    cov = np.empty((len(ids), 3, 3))
     for (a, b), k in zip(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)),
                          ("cov_ee", "cov_en", "cov_eh", "cov_nn", "cov_nh", "cov_hh"), strict=True):
         cov[:, a, b] = cov[:, b, a] = cols[k]
@@ -246,20 +300,48 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
     return data
 
 
+def _measurement_rays(ms: list):
+    """`_rays` for many Measurement objects at once: (owners, counts, origins, px, m, out, exc)."""
+    have = [i for i, m in enumerate(ms) if m.ray_origins_grid is not None]
+    if not have:
+        return None
+    sel = [ms[i] for i in have]
+    org = [m.ray_origins_grid for m in sel]
+    counts = np.array([o.shape[0] for o in org])
+
+    def cat(name, fill):
+        vals = [getattr(m, name) for m in sel]
+        return np.concatenate([np.full(c, fill) if v is None else np.asarray(v)
+                               for v, c in zip(vals, counts, strict=True)])
+
+    return (np.array(have), counts, np.concatenate(org), cat("residuals_px", math.nan),
+            cat("residuals_m", math.nan), cat("outliers", False).astype(bool),
+            np.concatenate([np.asarray(m.excluded, dtype=bool) for m in sel]))
+
+
 def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str]) -> None:
-    parts = [(i, r) for i, m in enumerate(solved) if (r := _rays(m)) is not None]
-    if not parts:
-        return
-    counts = np.array([r[0].shape[0] for _, r in parts])
-    owner = np.repeat(np.array([i for i, _ in parts]), counts)
-    org = np.concatenate([r[0] for _, r in parts])
+    if not any(isinstance(m, Mapping) for m in solved):
+        fast = _measurement_rays(solved)
+        if fast is None:
+            return
+        have, counts, org, px, rm, out, exc = fast
+        parts = [(0, (None, px, rm, out, exc))]
+    else:
+        parts = [(i, r) for i, m in enumerate(solved) if (r := _rays(m)) is not None]
+        if not parts:
+            return
+        have = np.array([i for i, _ in parts])
+        counts = np.array([r[0].shape[0] for _, r in parts])
+        org = np.concatenate([r[0] for _, r in parts])
+    owner = np.repeat(have, counts)
     seg = np.stack([org, xyz[owner]], axis=1)
     d = seg[:, 1] - seg[:, 0]
     pid = np.array(ids, dtype=object)[owner]
     data.ray_xyz = seg
     data.rays = Table({
         "point_id": pid,
-        "ray_index": np.concatenate([np.arange(c, dtype=np.int32) for c in counts]),
+        "ray_index": (np.arange(owner.shape[0]) - np.repeat(np.cumsum(counts) - counts, counts)
+                      ).astype(np.int32),
         "residual_px": np.concatenate([np.asarray(r[1], dtype=float) for _, r in parts]),
         "residual_m": np.concatenate([np.asarray(r[2], dtype=float) for _, r in parts]),
         "outlier": np.concatenate([np.asarray(r[3], dtype=bool) for _, r in parts]),
