@@ -32,7 +32,7 @@ from gsgeo.crs.pipeline import RECORD_KEYS, Measurement, measure_session
 from gsgeo.errors import CRSError, GeometryError, InputError
 from gsgeo.export import write_measurements
 from gsgeo.export.csvfile import CSV_COLUMNS
-from gsgeo.export.tables import POINT_TYPES
+from gsgeo.export.tables import ELLIPSE_VERTICES, POINT_TYPES
 
 EGM96 = Path("/usr/share/proj/egm96_15.gtx")
 ALL_LAYERS = {"points", "rays", "lines", "polygons", "error_ellipses"}
@@ -194,7 +194,9 @@ def test_gpkg_round_trip(which, request, tmp_path):
         poly = ell.loc[pid, "geometry"]
         a, b = rec["ellipse_major_95"], rec["ellipse_minor_95"]
         assert poly.is_valid and poly.exterior.is_ccw
-        assert poly.area == pytest.approx(math.pi * a * b, rel=2e-3)  # 72-gon
+        nv = ELLIPSE_VERTICES  # inscribed polygon of an ellipse: (n / 2) a b sin(2 pi / n)
+        assert len(poly.exterior.coords) == nv + 1
+        assert poly.area == pytest.approx(nv / 2 * a * b * math.sin(2 * math.pi / nv), rel=1e-6)
         xy = np.asarray(poly.exterior.coords) - [rec["easting"], rec["northing"]]
         far = xy[np.argmax(np.hypot(*xy.T))]
         bearing = math.degrees(math.atan2(far[0], far[1])) % 180
@@ -267,6 +269,18 @@ def test_geojson_rfc7946(which, request, tmp_path):
     df = gpd.read_file(out)
     assert CRS(df.crs).equals(CRS("OGC:CRS84")) or CRS(df.crs).to_epsg() == 4326
     assert df.has_z.all() and len(df) == len(doc["features"])
+
+
+def test_geojson_written_in_chunks_is_the_same_document(bng, tmp_path, monkeypatch):
+    import gsgeo.export.geojson as gj
+
+    s, res = bng
+    one = json.loads(write_measurements(tmp_path / "a.geojson", res, lines=s.lines,
+                                        polygons=s.polygons).read_text())
+    monkeypatch.setattr(gj, "FEATURE_CHUNK", 2)
+    many = json.loads(write_measurements(tmp_path / "b.geojson", res, lines=s.lines,
+                                         polygons=s.polygons).read_text())
+    assert many == one and len(many["features"]) == 9
 
 
 def test_geojson_legacy_grid(odn, tmp_path):

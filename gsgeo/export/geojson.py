@@ -29,6 +29,7 @@ from gsgeo.export.tables import ExportData, Table
 
 LONLAT_DECIMALS = 9
 HEIGHT_DECIMALS = 4
+FEATURE_CHUNK = 5000
 
 
 def crs_urn(text: str) -> str:
@@ -128,8 +129,19 @@ def feature_collection(data: ExportData, *, grid: bool = False) -> dict:
 
 
 def write_geojson(path: Path, data: ExportData, *, grid: bool = False) -> None:
-    """Write `data` as GeoJSON to a new file at `path` (UTF-8)."""
+    """Write `data` as GeoJSON to a new file at `path` (UTF-8).
+
+    Features are encoded in chunks with json.dumps (the C encoder; json.dump's incremental
+    encoder is pure Python and several times slower) to bound memory for large exports.
+    """
     doc = feature_collection(data, grid=grid)
+    features = doc.pop("features")
+    opts = {"ensure_ascii": False, "allow_nan": False, "separators": (",", ":")}
+    head = json.dumps(doc, **opts)
     with open(path, "x", encoding="utf-8") as fh:
-        json.dump(doc, fh, ensure_ascii=False, allow_nan=False, separators=(",", ":"))
-        fh.write("\n")
+        fh.write(head[:-1] + ',"features":[')
+        for k in range(0, len(features), FEATURE_CHUNK):
+            if k:
+                fh.write(",")
+            fh.write(json.dumps(features[k:k + FEATURE_CHUNK], **opts)[1:-1])
+        fh.write("]}\n")

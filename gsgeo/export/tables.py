@@ -32,7 +32,7 @@ POINT_TYPES.update(dict.fromkeys(
 POINT_TYPES["n_rays"] = "int"
 
 #: Vertices of an error-ellipse polygon (closed ring: one more).
-ELLIPSE_VERTICES = 72
+ELLIPSE_VERTICES = 36
 
 
 @dataclass
