@@ -1,9 +1,14 @@
 """Benchmark of gsgeo.crs: ECEF -> ENU throughput, to_grid with covariance, per-point latency.
 
-    python benchmarks/crs.py [--points 100000] [--repeat 3]
+    python benchmarks/crs.py [--points 100000] [--repeat 3] [--calibration 400]
 
 Prints a markdown table (paste it into benchmarks/README.md, section "CRS"). Points are
 scattered over 2 km around a site; covariances are random SPD 3x3 matrices.
+
+--calibration N also runs N end-to-end trials through gsgeo.crs.pipeline.measure_point (a
+known EPSG:27700 point, noisy viewer rays with a modelMatrix) and draws the squared
+Mahalanobis distances of the grid errors against chi-square(3) into
+benchmarks/crs_calibration.png.
 """
 
 from __future__ import annotations
@@ -52,10 +57,65 @@ def write_geoid(path):
     return path
 
 
+def calibration(trials: int, out: str = os.path.join(os.path.dirname(__file__),
+                                                    "crs_calibration.png")) -> None:
+    """End-to-end trials; histogram of Mahalanobis d^2 in (E, N, H) against chi-square(3)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from crs_helpers import camera_origins, model_matrix, noisy_directions, render
+    from pyproj import Transformer
+
+    from gsgeo.crs.modelmatrix import column_major
+
+    lon, lat = Transformer.from_crs("EPSG:27700", "EPSG:4326", always_xy=True).transform(529070, 179680)
+    p = geodetic_to_ecef(lon, lat, 61.5)
+    e, n, _ = Transformer.from_crs("EPSG:4978", "EPSG:27700", always_xy=True).transform(*p)
+    truth = np.array([e, n, 61.5])
+    m = model_matrix(p)
+    mm = np.array(column_major(m))
+    rng = np.random.default_rng(3)
+    ifov = 0.0008
+    d2, nrays = np.empty(trials), np.empty(trials, dtype=int)
+    t0 = time.perf_counter()
+    for k in range(trials):
+        nr = 2 + k % 5
+        o = camera_origins(p, nr, rng)
+        o_r, d_r = render(m, o, noisy_directions(o, p, ifov, rng))
+        pt = SessionPoint(f"T{k}", [Ray(a, b, ifov=ifov, model_matrix=mm)
+                                    for a, b in zip(o_r, d_r, strict=True)])
+        g = measure_point(pt, crs="EPSG:27700").grid
+        r = np.array([g.easting, g.northing, g.height]) - truth
+        d2[k] = r @ np.linalg.solve(g.covariance, r)
+        nrays[k] = nr
+        if k % 100 == 99:
+            print(f"  calibration: {k + 1}/{trials} trials", file=sys.stderr)
+    cover = np.mean(d2 <= 7.814727903251178)
+    print(f"  calibration: {trials} trials in {time.perf_counter() - t0:.1f} s, 95 % ellipsoid "
+          f"coverage {100 * cover:.1f} %, mean d^2 {d2.mean():.2f} (expected 3)", file=sys.stderr)
+    x = np.linspace(0, 16, 400)
+    pdf = np.sqrt(x / (2 * np.pi)) * np.exp(-x / 2)  # chi-square(3)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.hist(np.minimum(d2, 16), bins=40, range=(0, 16), density=True, alpha=0.6,
+            label=f"{trials} end-to-end trials (2-6 rays)")
+    ax.plot(x, pdf, "k-", label="chi-square, 3 dof")
+    ax.axvline(7.8147, color="r", ls="--", label=f"95 % ellipsoid: {100 * cover:.1f} % inside")
+    ax.set_xlabel("squared Mahalanobis distance of the grid error (E, N, H)")
+    ax.set_ylabel("density")
+    ax.set_title("gsgeo.crs pipeline: known EPSG:27700 point, 1 px aiming noise, modelMatrix")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print(f"  wrote {out}", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=100_000)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--calibration", type=int, default=0, metavar="TRIALS")
     args = ap.parse_args(argv)
     m, rep = args.points, args.repeat
     rng = np.random.default_rng(1)
@@ -98,6 +158,8 @@ def main(argv=None) -> int:
     row("measure_point (5 rays, full pipeline to EPSG:27700)", len(pts),
         best(lambda: [measure_point(q, crs="EPSG:27700") for q in pts], rep))
 
+    if args.calibration:
+        calibration(args.calibration)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"\nMeasured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on "
           f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
