@@ -205,6 +205,24 @@ def test_gpkg_round_trip(which, request, tmp_path):
         assert min(diff, 180 - diff) < 1e-6
 
 
+def test_user_geoid_file_export_states_its_datum(tmp_path, rng):
+    """--geoid FILE.tif: orthometric heights without a vertical CRS; the CRS stays 2-D EPSG:27700
+    and the height_type / vertical_datum fields say what the heights are."""
+    write_fake_osgm15(tmp_path)
+    geoid = tmp_path / "uk_os_OSGM15_GB.tif"
+    res = measure_session(session(rng), crs="EPSG:27700", geoid=geoid)
+    out = write_measurements(tmp_path / "g.gpkg", res)
+    assert CRS(pyogrio.read_info(out, layer="points")["crs"]).equals(CRS("EPSG:27700"))
+    df = pyogrio.read_dataframe(out, layer="points").set_index("point_id")
+    for m in res:
+        row = df.loc[m.point_id]
+        assert row.height_type == "orthometric" and "uk_os_OSGM15_GB.tif" in row.vertical_datum
+        assert row.geometry.z == row.height == pytest.approx(
+            m.grid.h_ellipsoidal - undulation(m.grid.lon, m.grid.lat), abs=1e-3)
+    rows = list(csv.DictReader(write_measurements(tmp_path / "g.csv", res).read_text().splitlines()))
+    assert {r["height_type"] for r in rows} == {"orthometric"} and {r["crs"] for r in rows} == {"EPSG:27700"}
+
+
 def test_gpkg_has_no_empty_layers(bng, tmp_path):
     _, res = bng
     out = write_measurements(tmp_path / "pts.gpkg", res)  # no lines, no polygons
