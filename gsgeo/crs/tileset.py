@@ -184,7 +184,8 @@ class Tileset:
 
     def _tile(self, t: dict, parent: np.ndarray, where: str) -> Tile:
         m = parent @ matrix4(t["transform"]) if "transform" in t else parent
-        content = t.get("content") or {}
+        # 3D Tiles 1.1 allows several "contents"; positions share the tile's transform.
+        content = t.get("content") or (t.get("contents") or [{}])[0] or {}
         uri = content.get("uri") or content.get("url")
         tile = Tile(where, m, t.get("boundingVolume", {}), uri)
         tile.children = [self._tile(c, m, f"{where}/children[{i}]")
