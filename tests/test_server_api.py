@@ -536,3 +536,76 @@ def test_feature_measures_follow_their_points(client, project):
     assert line["length_2d"] == pytest.approx(40.0, abs=0.01)
     assert client.get(f"/api/projects/{project}/polygons/A1").json()["measures"]["area_2d"] == \
         pytest.approx(300.0, abs=0.2)
+
+
+# export ----------------------------------------------------------------------------------------
+def _export_project(client, project):
+    corners = [(0, 0), (20, 0), (20, 10), (0, 10)]
+    e0, n0 = UTM30.transform(*LONDON[:2])
+    inv = pyproj.Transformer.from_crs("EPSG:32630", "EPSG:4979", always_xy=True)
+    for k, (de, dn) in enumerate(corners):
+        lon, lat = inv.transform(e0 + de, n0 + dn)
+        client.post(f"/api/projects/{project}/points",
+                    json={"id": f"C{k}", "rays": rays_at(ecef_of(lon, lat, 40.0), 4)})
+    client.post(f"/api/projects/{project}/lines", json={"id": "L", "points": ["C0", "C1"]})
+    client.post(f"/api/projects/{project}/polygons", json={"id": "A", "points": ["C0", "C1",
+                                                                                  "C2", "C3"]})
+    client.post(f"/api/projects/{project}/polygons", json={"id": "bow", "points": ["C0", "C2",
+                                                                                    "C1", "C3"]})
+    return e0, n0
+
+
+def test_export_gpkg(client, project, tmp_path):
+    import pyogrio
+
+    e0, n0 = _export_project(client, project)
+    r = client.get(f"/api/projects/{project}/export", params={"format": "gpkg"})
+    assert r.status_code == 200, r.text
+    assert r.headers["content-type"] == "application/geopackage+sqlite3"
+    assert "attachment" in r.headers["content-disposition"]
+    assert "bow" in r.headers["x-gsgeo-skipped"]  # the self-intersecting ring is left out
+    path = tmp_path / "out.gpkg"
+    path.write_bytes(r.content)
+    pts = pyogrio.read_dataframe(path, layer="points")
+    assert list(pts["point_id"]) == ["C0", "C1", "C2", "C3"]
+    assert pts.crs.to_epsg() == 32630
+    assert pts["easting"][1] == pytest.approx(e0 + 20, abs=1e-4)
+    lines = pyogrio.read_dataframe(path, layer="lines")
+    assert lines["length_2d"][0] == pytest.approx(20.0, abs=1e-3)
+    polys = pyogrio.read_dataframe(path, layer="polygons")
+    assert list(polys["polygon_id"]) == ["A"]
+    assert polys["area_2d"][0] == pytest.approx(200.0, abs=0.01)
+
+
+def test_export_geojson_and_csv_in_another_crs(client, project):
+    _export_project(client, project)
+    r = client.get(f"/api/projects/{project}/export", params={"format": "geojson"})
+    assert r.status_code == 200 and r.headers["content-type"] == "application/geo+json"
+    doc = json.loads(r.content)
+    pts = [f for f in doc["features"] if f["properties"].get("point_id") == "C0"]
+    assert pts[0]["geometry"]["coordinates"][0] == pytest.approx(LONDON[0], abs=1e-8)
+    r = client.get(f"/api/projects/{project}/export", params={"format": "csv", "crs": "EPSG:32631"})
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
+    import csv as csvmod
+
+    rows = list(csvmod.DictReader(io.StringIO(r.text)))
+    lon, lat = pts[0]["geometry"]["coordinates"][:2]
+    e, n = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:32631", always_xy=True).transform(lon, lat)
+    assert rows[0]["point_id"] == "C0" and rows[0]["crs"] == "EPSG:32631"
+    assert float(rows[0]["easting"]) == pytest.approx(e, abs=1e-4)
+    # the stored project is untouched by an export in another CRS
+    assert client.get(f"/api/projects/{project}/points/C0").json()["record"]["crs"] == "EPSG:32630"
+
+
+def test_export_errors(client, project):
+    base = f"/api/projects/{project}/export"
+    expect_422(client.get(base), "no solved points")
+    add_point(client, project, 0)
+    expect_422(client.get(base, params={"format": "xls"}), "format")
+    expect_422(client.get(base, params={"crs": "EPSG:999999"}), "crs")
+    assert client.get("/api/projects/none/export").status_code == 404
+    pid = client.post("/api/projects", json={"name": "no grid"}).json()["id"]
+    client.post(f"/api/projects/{pid}/points", json={"rays": london_rays(3)})
+    expect_422(client.get(f"/api/projects/{pid}/export"), "crs")
+    assert client.get(f"/api/projects/{pid}/export",
+                      params={"crs": "EPSG:32630", "format": "csv"}).status_code == 200

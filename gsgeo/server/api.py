@@ -24,13 +24,30 @@ from gsgeo.store.checkpoints import FORMATS, CheckPointRow, format_from_name, re
 from gsgeo.store.projects import validate_settings
 from gsgeo.store.solving import check_excluded, json_ready, measure, session_point
 
-router = APIRouter(prefix="/api")
+
+class ErrorBody(m.BaseModel):
+    """Every error: ``message`` names the field first ("rays[1].direction: ...")."""
+
+    detail: Any
+    message: str
+    field: str | None = None
+
+
+router = APIRouter(prefix="/api", responses={
+    400: {"model": ErrorBody, "description": "Host header not served, or bad Content-Length"},
+    401: {"model": ErrorBody, "description": "token missing or wrong (server bound off loopback)"},
+    403: {"model": ErrorBody, "description": "cross-origin request"},
+    404: {"model": ErrorBody, "description": "no such project, point, line, polygon or check point"},
+    409: {"model": ErrorBody, "description": "id already taken, or the point is still in use"},
+    413: {"model": ErrorBody, "description": "request body over the size limit"},
+    422: {"model": ErrorBody, "description": "malformed request; message names the field"},
+})
 
 PID = Annotated[str, m.Field(description="project id", max_length=64)]
 ITEM = Annotated[str, m.Field(description="point, line, polygon or check point id",
                               max_length=100)]
 EXPORT_TYPES = {"gpkg": "application/geopackage+sqlite3", "geojson": "application/geo+json",
-                "csv": "text/csv; charset=utf-8"}
+                "geojson-grid": "application/json", "csv": "text/csv; charset=utf-8"}
 
 
 def svc(request: Request) -> Projects:
@@ -291,19 +308,27 @@ def accuracy(pid: PID, request: Request,
 # export ----------------------------------------------------------------------------------------
 @router.get("/projects/{pid}/export", summary="Download points, lines and polygons",
             response_class=FileResponse,
-            responses={200: {"content": {t: {} for t in EXPORT_TYPES.values()}}})
+            responses={200: {"content": {t: {} for t in EXPORT_TYPES.values()},
+                             "description": "the file; header X-Gsgeo-Skipped lists features "
+                                            "left out (failed points, invalid rings)"}})
 def export(pid: PID, request: Request,
-           format: Annotated[Literal["gpkg", "geojson", "csv"], Query()] = "gpkg",
-           crs: Annotated[str | None, Query(max_length=20000,
-                                            description="grid CRS; the project's when absent")] = None,
+           format: Annotated[Literal["gpkg", "geojson", "geojson-grid", "csv"], Query(
+               description="gpkg, geojson (RFC 7946), geojson-grid (legacy, grid "
+                           "coordinates) or csv")] = "gpkg",
+           crs: Annotated[str | None, Query(max_length=20000, description=(
+               "grid CRS; the project's when absent (another CRS re-measures from the rays)"))]
+           = None,
            ) -> FileResponse:
     from gsgeo.server.exporting import export_project
 
     tmpdir = Path(tempfile.mkdtemp(prefix="gsgeo-export-"))
     try:
-        path = export_project(svc(request), pid, tmpdir, format, crs)
+        path, skipped = export_project(svc(request), pid, tmpdir, format, crs)
     except BaseException:
         shutil.rmtree(tmpdir, ignore_errors=True)
         raise
+    headers = {"X-Gsgeo-Skipped": "; ".join(skipped).encode("ascii", "replace").decode()[:2000]} \
+        if skipped else None
     return FileResponse(path, media_type=EXPORT_TYPES[format], filename=path.name,
+                        headers=headers,
                         background=BackgroundTask(shutil.rmtree, tmpdir, ignore_errors=True))

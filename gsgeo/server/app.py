@@ -125,9 +125,10 @@ def _install_error_handlers(app: FastAPI) -> None:
         if isinstance(exc.__cause__, BodyTooLarge):
             return _error(413, str(exc.__cause__), "body")
         msg = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
-        if exc.status_code == 400 and "parsing the body" in msg:
-            msg = "body: cannot be parsed (malformed JSON or form data)"
-        resp = _error(exc.status_code, msg, "body" if msg.startswith("body") else None)
+        status = exc.status_code
+        if status == 400 and "parsing the body" in msg:
+            status, msg = 422, "body: cannot be parsed (malformed JSON, not UTF-8, or bad form data)"
+        resp = _error(status, msg, "body" if msg.startswith("body") else None)
         for k, v in (exc.headers or {}).items():
             resp.headers[k] = v
         return resp

@@ -48,13 +48,14 @@ def _host_name(host: str) -> str:
 
 
 class Guard:
-    """The middleware. ``allowed_hosts`` None accepts any Host (use with a token)."""
+    """The middleware. ``allowed_hosts`` None (or containing "*") accepts any Host."""
 
     def __init__(self, app: ASGIApp, *, token: str | None, allowed_hosts: set[str] | None,
                  max_body: int, max_upload: int, upload_paths: tuple[str, ...] = ("/import",)):
         self.app = app
         self.token = token
-        self.allowed_hosts = {h.lower() for h in allowed_hosts} if allowed_hosts else None
+        self.allowed_hosts = ({h.lower() for h in allowed_hosts}
+                              if allowed_hosts and "*" not in allowed_hosts else None)
         self.max_body = max_body
         self.max_upload = max_upload
         self.upload_paths = upload_paths

@@ -251,15 +251,12 @@ class SQLiteStore(Store):
         self._local = threading.local()
         self._connections: list[sqlite3.Connection] = []
         self._lock = threading.Lock()
-        self._closed = False
         self._migrate()
 
     def _connect(self) -> sqlite3.Connection:
         con = getattr(self._local, "con", None)
         if con is not None:
             return con
-        if self._closed:
-            raise StoreError("the store is closed")
         try:
             con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000,
                                   isolation_level=None, check_same_thread=False)
@@ -342,8 +339,8 @@ class SQLiteStore(Store):
         return problems
 
     def close(self) -> None:
+        """Close every connection; the store reconnects if it is used again."""
         with self._lock:
-            self._closed = True
             for con in self._connections:
                 try:
                     con.close()
