@@ -76,6 +76,8 @@ def _get(obj: Any, key: str, default: Any = None) -> Any:
 
 
 def _is_failure(m: Any) -> bool:
+    if type(m).__name__ == "Measurement":  # the common case, without an ABC check per point
+        return False
     if isinstance(m, Mapping):
         return "error" in m and "point_id" in m and m.get("easting") is None and "rays" not in m
     return type(m).__name__ == "MeasurementFailure"
@@ -320,7 +322,7 @@ def _measurement_rays(ms: list):
 
 
 def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str]) -> None:
-    if not any(isinstance(m, Mapping) for m in solved):
+    if all(type(m).__name__ == "Measurement" for m in solved):
         fast = _measurement_rays(solved)
         if fast is None:
             return
