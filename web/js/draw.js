@@ -2,6 +2,7 @@
 // rendered ECEF frame (georeferenced ECEF carried through the tileset's current modelMatrix).
 
 import { eigSym3, transformCovariance, applyPoint } from "./linalg.js";
+import { Overlay } from "./overlay.js";
 
 const Cesium = window.Cesium;
 
@@ -38,12 +39,14 @@ export class Drawer {
     this.ds = new Cesium.CustomDataSource("gsgeo");
     viewer.dataSources.add(this.ds);
     this.groups = new Map();
+    this.overlay = new Overlay(viewer, document.getElementById("viewer-wrap"), document.getElementById("status"));
   }
 
   clear(group) {
     const list = this.groups.get(group) || [];
     for (const e of list) this.ds.entities.remove(e);
     this.groups.set(group, []);
+    this.overlay.clear(group);
   }
 
   add(group, options) {
@@ -62,12 +65,7 @@ export class Drawer {
   ray(group, origin, direction, len, color, label) {
     const end = [origin[0] + direction[0] * len, origin[1] + direction[1] * len,
       origin[2] + direction[2] * len];
-    this.add(group, {
-      polyline: {
-        positions: [cart(origin), cart(end)], width: 2, arcType: Cesium.ArcType.NONE,
-        material: color, depthFailMaterial: color.withAlpha(0.45),
-      },
-    });
+    this.overlay.add(group, [origin, end], { color: color.toCssColorString(), width: 2 });
     this.add(group, {
       position: cart(origin),
       point: { pixelSize: 6, color, outlineColor: Cesium.Color.BLACK, outlineWidth: 1,
@@ -104,27 +102,24 @@ export class Drawer {
     const cov = transformCovariance(mm, covGeo);
     const { radii, vectors } = ellipsoidAxes(cov, k);
     if (!radii.every((r) => Number.isFinite(r) && r > 0)) return radii;
-    const rot = Cesium.Matrix3.fromColumnMajorArray([...vectors[0], ...vectors[1], ...vectors[2]]);
-    this.add(group, {
-      position: cart(p),
-      orientation: Cesium.Quaternion.fromRotationMatrix(rot),
-      ellipsoid: {
-        radii: new Cesium.Cartesian3(radii[0], radii[1], radii[2]),
-        material: color.withAlpha(0.45), outline: true, outlineColor: color,
-        slicePartitions: 24, stackPartitions: 16,
-      },
-    });
+    // the three principal sections, drawn at true size
+    const css = color.toCssColorString();
+    for (const [a, b] of [[0, 1], [1, 2], [2, 0]]) {
+      const ring = [];
+      for (let i = 0; i < 48; i++) {
+        const t = (2 * Math.PI * i) / 48;
+        const ca = radii[a] * Math.cos(t);
+        const sb = radii[b] * Math.sin(t);
+        ring.push([0, 1, 2].map((k) => p[k] + ca * vectors[a][k] + sb * vectors[b][k]));
+      }
+      this.overlay.add(group, ring, { color: css, width: 1.5, closed: true });
+    }
     return radii;
   }
 
-  /** A polyline through rendered positions; closed when `closed`. */
+  /** A polyline through rendered positions (drawn on the overlay); closed when `closed`. */
   path(group, positions, color, closed = false, width = 3) {
-    const pts = positions.map(cart);
-    if (closed && pts.length > 2) pts.push(pts[0]);
-    if (pts.length < 2) return;
-    this.add(group, {
-      polyline: { positions: pts, width, arcType: Cesium.ArcType.NONE, material: color,
-        depthFailMaterial: color.withAlpha(0.5) },
-    });
+    if (positions.length < 2) return;
+    this.overlay.add(group, positions, { color: color.toCssColorString(), width, closed: closed && positions.length > 2 });
   }
 }

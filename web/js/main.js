@@ -517,7 +517,7 @@ function drawCurrent() {
       radii = draw.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, confScale(), COLORS.solution);
       draw.add("current", {
         position: cart(pRendered),
-        point: { pixelSize: 7, color: COLORS.solution, outlineColor: Cesium.Color.BLACK, outlineWidth: 1,
+        point: { pixelSize: 14, color: Cesium.Color.TRANSPARENT, outlineColor: COLORS.solution, outlineWidth: 2,
           disableDepthTestDistance: Number.POSITIVE_INFINITY },
       });
     }
@@ -739,7 +739,7 @@ function measuresText(ms) {
   if (ms.error) return ms.error;
   const parts = [];
   for (const [k, v] of Object.entries(ms)) {
-    if (typeof v !== "number" || k.startsWith("sigma")) continue;
+    if (typeof v !== "number" || k.startsWith("sigma") || k === "n_points") continue;
     const sig = ms[`sigma_${k}`];
     const val = k.includes("area") ? area(v) : (/length|perimeter/.test(k) ? length(v) : fixed(v));
     parts.push(`${k.replace(/_/g, " ")} ${val}${typeof sig === "number" ? ` ± ${k.includes("area") ? area(sig) : length(sig)}` : ""}`);
@@ -876,9 +876,9 @@ viewer.scene.postRender.addEventListener(() => {
 const clicks = new Cesium.ScreenSpaceEventHandler(viewer.scene.canvas);
 clicks.setInputAction((ev) => {
   if (state.mode === "measure") { addRay(ev.position); return; }
-  const picked = viewer.scene.pick(ev.position);
-  const id = picked && picked.id && typeof picked.id.id === "string" && picked.id.id.startsWith("pt:")
-    ? picked.id.id.slice(3) : null;
+  const hit = viewer.scene.drillPick(ev.position, 8).find((o) => o && o.id && typeof o.id.id === "string"
+    && o.id.id.startsWith("pt:"));
+  const id = hit ? hit.id.id.slice(3) : null;
   if (state.mode === "line" || state.mode === "polygon") {
     if (id) pickFeaturePoint(id);
     else message("Click on a point marker (or a row of the points list).");

@@ -1,0 +1,347 @@
+"""The measuring workplace (web/) in a real browser: measure a known point of a scene made by
+`gsgeo tiles` from several viewpoints with real mouse clicks and keys, store it in a project,
+check it against the ground truth, export it.
+
+The ground truth is independent of the viewer: the marker's ENU coordinates in the generated
+PLY, carried to ECEF and to the grid by pyproj. Clicks go to the marker's projected window
+position (Cesium.SceneTransforms.worldToWindowCoordinates) through page.mouse.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+
+import numpy as np
+import pyproj
+import pytest
+
+from tests.e2e.scene import MARKERS
+from tests.e2e.workplace import (AIM_JS, ARTIFACTS, CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, SCENE,
+                                 VIEWPOINTS, enu_to_ecef, make_data_dir, up_vector)
+
+pytestmark = pytest.mark.e2e
+
+VIEWPORT = {"width": 1280, "height": 720}
+GRID = "EPSG:32630"  # WGS 84 / UTM zone 30N: a pure conversion from WGS 84, exact in pyproj
+TO_GRID = pyproj.Transformer.from_crs("EPSG:4979", GRID, always_xy=True)
+TO_GEO = pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is not installed")
+    if importlib.util.find_spec("playwright") is None:
+        pytest.skip("Playwright for Python is not installed")
+    if not CESIUM_JS.is_file():
+        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
+    from tests.servertools import start_server
+
+    data = make_data_dir(tmp_path_factory.mktemp("workplace"))
+    proc, base = start_server(data)
+    try:
+        yield base
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+@pytest.fixture(scope="module")
+def browser(server):
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="module")
+def project(server):
+    """A project made through the API for the tests that do not test project creation."""
+    import httpx
+
+    r = httpx.post(f"{server}/api/projects", json={"name": "E2E", "id": "e2e", "scene": SCENE,
+                                                   "crs": GRID, "sigma_px": 1.0})
+    assert r.status_code == 201, r.text
+    return "e2e"
+
+
+class Page:
+    """A workplace page with console errors collected."""
+
+    def __init__(self, browser, url: str):
+        self.errors: list[str] = []
+        self.page = browser.new_page(viewport=VIEWPORT, accept_downloads=True)
+        self.page.on("console", lambda m: m.type == "error" and self.errors.append(m.text))
+        self.page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
+        self.page.goto(url)
+        self.page.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
+        self.wait_tiles()
+
+    def wait_tiles(self):
+        self.page.wait_for_function(
+            "window.gsgeo.tileset && window.gsgeo.tilesReady && window.gsgeo.tileset.tilesLoaded",
+            timeout=90_000)
+
+    def shot(self, name: str, settle_ms: int = 3500):
+        """Screenshot to artifacts/ after the splats had time to sort and draw."""
+        self.page.wait_for_timeout(settle_ms)
+        ARTIFACTS.mkdir(exist_ok=True)
+        self.page.screenshot(path=str(ARTIFACTS / f"workplace_{name}.png"))
+
+    def click_world(self, target_rendered, view) -> dict:
+        az, el, rng, off = view
+        aim = self.page.evaluate(AIM_JS, [list(map(float, target_rendered)), az, el, rng, list(off)])
+        assert aim["dist"] < 1e-5, aim  # the projection and the pick ray agree
+        w, h = aim["canvas"]
+        assert 0 < aim["win"][0] < w and 0 < aim["win"][1] < h, aim
+        self.page.mouse.click(aim["x"], aim["y"])
+        return aim
+
+    def ray_rows(self) -> int:
+        return self.page.locator("#ray-table tbody tr").count()
+
+    def wait_rays(self, n: int):
+        self.page.wait_for_function(f"document.querySelectorAll('#ray-table tbody tr').length === {n}")
+
+    def wait_solution(self):
+        self.page.wait_for_function(
+            "() => /σ0/.test(document.querySelector('#live-solution').textContent)", timeout=30_000)
+
+    def close(self):
+        self.page.close()
+
+
+def _known(marker: str) -> np.ndarray:
+    return enu_to_ecef(MARKERS[marker])
+
+
+def _grid_of(ecef) -> tuple[float, float, float]:
+    lon, lat, h = TO_GEO.transform(*ecef)
+    e, n = TO_GRID.transform(lon, lat)
+    return e, n, h
+
+
+def _measure(p: Page, target_rendered, views, code: str = "") -> dict:
+    p.page.keyboard.press("m")
+    p.page.wait_for_selector("#measure-panel:not([hidden])")
+    for i, view in enumerate(views):
+        p.click_world(target_rendered, view)
+        p.wait_rays(i + 1)
+        if i >= 1:
+            p.wait_solution()
+    if code:
+        p.page.fill("#pt-code", code)
+    with p.page.expect_response(lambda r: r.url.endswith("/points") and r.request.method == "POST") as resp:
+        p.page.keyboard.press("Enter")
+    assert resp.value.status == 201, resp.value.text()
+    p.page.wait_for_selector("#measure-panel", state="hidden")
+    return resp.value.json()
+
+
+def test_create_project_and_measure_known_point(server, browser):
+    """Project made in the UI (CRS found by search); 4 rays on the roof corner -> the stored
+    point is the marker within 5 mm, and the list shows it in UTM 30N."""
+    p = Page(browser, server + "/")
+    try:
+        p.page.click("#btn-new-project")
+        p.page.fill("#pf-name", "Roof survey")
+        p.page.fill("#pf-crs-q", "UTM zone 30N")
+        p.page.click(f"#pf-crs-results li[data-code='{GRID}']")
+        p.page.fill("#pf-sigma", "0.8")
+        p.page.click("#pf-submit")
+        p.page.wait_for_function("document.querySelector('#project-dialog').hidden"
+                                 " || document.querySelector('#pf-error').textContent")
+        assert p.page.inner_text("#pf-error") == ""
+        p.page.wait_for_selector("#project-dialog", state="hidden")
+        assert GRID in p.page.inner_text("#project-info")
+        assert "0.8" in p.page.inner_text("#project-info")
+        p.shot("01_project_created")
+
+        known = _known("roof_ne")
+        p.page.keyboard.press("m")
+        assert "click the feature to add ray 1" in p.page.inner_text("#status")
+        for i, view in enumerate(VIEWPOINTS):
+            p.click_world(known, view)
+            p.wait_rays(i + 1)
+            if i == 0:
+                assert "Move the camera to another viewpoint" in p.page.inner_text("#status")
+            else:
+                p.wait_solution()
+            if i == 2:
+                p.shot("02_measuring_3_rays")
+        # residuals of exact clicks are tiny; every ray has one
+        res_px = [float(t) for t in p.page.locator("#ray-table tbody tr td:nth-child(2)").all_inner_texts()]
+        assert len(res_px) == 4 and max(res_px) < 0.05, res_px
+        note = p.page.inner_text("#ellipsoid-note")
+        assert "95 %" in note and "2.7955" in note
+        p.page.fill("#pt-code", "roof corner")
+        p.page.focus("#pt-code")
+        with p.page.expect_response(lambda r: r.url.endswith("/points") and r.request.method == "POST") as resp:
+            p.page.keyboard.press("Enter")
+        stored = resp.value.json()
+        p.page.wait_for_selector("#points-table tbody tr[data-id='P1']")
+        p.shot("03_point_stored")
+
+        got = np.array(stored["result"]["point_ecef"])
+        assert np.linalg.norm(got - known) < 0.005, (got - known)
+        rec = stored["record"]
+        e, n, h = _grid_of(known)
+        assert rec["crs"] == GRID and rec["code"] == "roof corner" and rec["n_rays"] == 4
+        assert abs(rec["easting"] - e) < 0.005 and abs(rec["northing"] - n) < 0.005
+        assert abs(rec["height"] - h) < 0.005
+
+        cells = p.page.locator("#points-table tbody tr[data-id='P1'] td").all_inner_texts()
+        assert cells[0] == "P1" and cells[1] == "roof corner"
+        assert abs(float(cells[2]) - e) <= 0.0051 and abs(float(cells[3]) - n) <= 0.0051
+        assert abs(float(cells[4]) - h) <= 0.0051
+        assert cells[7] == "4"
+        assert p.errors == []
+    finally:
+        p.close()
+
+
+def test_shifted_model_matrix_stores_georeferenced_point(server, browser, project):
+    """With the tileset lifted 10 m by its modelMatrix the clicks hit the rendered marker, and
+    the stored point is the georeferenced one."""
+    p = Page(browser, f"{server}/?project={project}")
+    try:
+        lift = 10.0
+        p.page.evaluate("""(t) => { const C = Cesium;
+            gsgeo.tileset.modelMatrix = C.Matrix4.fromTranslation(new C.Cartesian3(t[0], t[1], t[2])); }""",
+                        list(up_vector() * lift))
+        known = _known("ground_sw")
+        rendered = known + up_vector() * lift
+        stored = _measure(p, rendered, VIEWPOINTS[:3], code="shifted")
+        p.shot("04_shifted_model_matrix")
+        got = np.array(stored["result"]["point_ecef"])
+        assert np.linalg.norm(got - known) < 0.005, (got - known)
+        mm = stored["rays"][0]["model_matrix"]
+        assert np.allclose(mm[12:15], up_vector() * lift) and mm[15] == 1.0  # column-major
+        e, n, h = _grid_of(known)
+        rec = stored["record"]
+        assert abs(rec["easting"] - e) < 0.005 and abs(rec["height"] - h) < 0.005
+        # the marker of the stored point is drawn where the tileset is now rendered
+        drawn = p.page.evaluate(f"""() => {{ const e = gsgeo.viewer.dataSources.get(0).entities.getById('pt:{stored["id"]}');
+            const q = e.position.getValue(gsgeo.viewer.clock.currentTime); return [q.x, q.y, q.z]; }}""")
+        assert np.linalg.norm(np.array(drawn) - rendered) < 0.005
+        assert p.errors == []
+    finally:
+        p.close()
+
+
+def test_backspace_and_escape(server, browser, project):
+    p = Page(browser, f"{server}/?project={project}")
+    try:
+        before = p.page.locator("#points-table tbody tr[data-id]").count()
+        known = _known("roof_c")
+        p.page.keyboard.press("m")
+        for i, view in enumerate(VIEWPOINTS[:3]):
+            p.click_world(known, view)
+            p.wait_rays(i + 1)
+        p.wait_solution()
+        p.page.keyboard.press("Backspace")
+        p.wait_rays(2)
+        p.wait_solution()
+        assert "2 rays" in p.page.inner_text("#status")
+        p.page.keyboard.press("Backspace")
+        p.wait_rays(1)
+        p.page.wait_for_function(
+            "() => /at least 2 rays/.test(document.querySelector('#live-solution').textContent)")
+        p.shot("05_after_backspace", settle_ms=500)
+        p.page.keyboard.press("Escape")
+        p.page.wait_for_selector("#measure-panel", state="hidden")
+        assert "M (or Measure point) starts a point" in p.page.inner_text("#status")
+        # nothing was stored, and Enter outside measuring does not store anything either
+        p.page.keyboard.press("Enter")
+        p.page.wait_for_timeout(300)
+        assert p.page.locator("#points-table tbody tr[data-id]").count() == before
+        # the help overlay opens with ? and closes with Escape
+        p.page.keyboard.press("?")
+        p.page.wait_for_selector("#help:not([hidden])")
+        p.shot("06_help", settle_ms=500)
+        p.page.keyboard.press("Escape")
+        p.page.wait_for_selector("#help", state="hidden")
+        assert p.errors == []
+    finally:
+        p.close()
+
+
+def test_lines_polygons_and_export(server, browser, project, tmp_path):
+    """Three measured markers; a line and a polygon from them with the lengths the geometry
+    gives; the GeoPackage download reads back with the points."""
+    pyogrio = pytest.importorskip("pyogrio")
+    p = Page(browser, f"{server}/?project={project}")
+    try:
+        ids = {}
+        for name in ("roof_ne", "ground_sw", "roof_c"):
+            ids[name] = _measure(p, _known(name), VIEWPOINTS[:3], code=name)["id"]
+        # line: pick in the list
+        p.page.keyboard.press("l")
+        for name in ("roof_ne", "ground_sw"):
+            p.page.click(f"#points-table tbody tr[data-id='{ids[name]}']")
+        with p.page.expect_response(lambda r: r.url.endswith("/lines") and r.request.method == "POST") as resp:
+            p.page.keyboard.press("Enter")
+        line = resp.value.json()
+        a, b = (np.array(MARKERS[k]) for k in ("roof_ne", "ground_sw"))
+        # UTM scale factor near 0.12 W, 51.5 N is ~0.99998 over 6 m: well under a millimetre
+        assert abs(line["measures"]["length_3d"] - np.linalg.norm(a - b)) < 0.005
+        # polygon: pick in the scene by clicking the point markers
+        p.page.keyboard.press("p")
+        for name in ("roof_ne", "ground_sw", "roof_c"):
+            p.click_world(_known(name), (200.0, 70.0, 16.0, (0.0, 0.0, 0.0)))
+            p.page.wait_for_timeout(200)
+        assert p.page.inner_text("#feature-points").count("→") == 2
+        with p.page.expect_response(lambda r: r.url.endswith("/polygons") and r.request.method == "POST") as resp:
+            p.page.keyboard.press("Enter")
+        poly = resp.value.json()
+        xy = np.array([MARKERS[k][:2] for k in ("roof_ne", "ground_sw", "roof_c")])
+        area = 0.5 * abs(np.cross(xy[1] - xy[0], xy[2] - xy[0]))
+        assert abs(poly["measures"]["area_2d"] - area) < 0.01
+        p.page.wait_for_selector("#features-table tbody tr:nth-child(2)")
+        p.shot("07_line_polygon")
+
+        with p.page.expect_download() as dl:
+            p.page.click("button[data-export='gpkg']")
+        path = tmp_path / "export.gpkg"
+        dl.value.save_as(path)
+        pts = pyogrio.read_dataframe(path, layer="points")
+        row = pts[pts["point_id"] == ids["roof_ne"]].iloc[0]
+        e, n, h = _grid_of(_known("roof_ne"))
+        assert abs(row["easting"] - e) < 0.005 and abs(row["northing"] - n) < 0.005
+        assert abs(row["height"] - h) < 0.005
+        assert set(pyogrio.list_layers(path)[:, 0]) >= {"points", "lines", "polygons"}
+        assert p.errors == []
+    finally:
+        p.close()
+
+
+def test_check_points_accuracy_panel(server, browser, project, tmp_path):
+    """Import the markers' true grid coordinates as check points (CSV); the accuracy panel
+    shows each measured point's differences (a few mm at most) and the RMSE summary."""
+    p = Page(browser, f"{server}/?project={project}")
+    try:
+        pts = p.page.evaluate("gsgeo.state.points.map(q => [q.id, q.code])")
+        rows = ["id,x,y,z"]
+        for pid, code in pts:
+            if code in MARKERS:
+                e, n, h = _grid_of(_known(code))
+                rows.append(f"{pid},{e:.4f},{n:.4f},{h:.4f}")
+        if len(rows) < 2:
+            pytest.skip("no marker points measured (run the whole module)")
+        csv = tmp_path / "check.csv"
+        csv.write_text("\n".join(rows) + "\n")
+        p.page.set_input_files("#check-file", str(csv))
+        p.page.click("#check-form button[type=submit]")
+        p.page.wait_for_selector("#accuracy-table tbody tr")
+        diffs = p.page.locator("#accuracy-table tbody tr td:nth-child(5)").all_inner_texts()
+        assert len(diffs) == len(rows) - 1
+        assert all(abs(float(d)) < 5.0 for d in diffs), diffs  # mm
+        summary = p.page.inner_text("#accuracy-summary")
+        assert re.search(r"RMSE E [\d.]+", summary) and f"{len(rows) - 1} of {len(rows) - 1}" in summary
+        p.shot("08_accuracy", settle_ms=1500)
+        assert p.errors == []
+    finally:
+        p.close()
