@@ -55,7 +55,7 @@ def _ensure_fixture_project() -> None:
 
 
 @schema.parametrize()
-@settings(max_examples=40, deadline=None,
+@settings(max_examples=10, deadline=None,
           suppress_health_check=list(HealthCheck))
 def test_api_never_answers_500(case):
     _ensure_fixture_project()

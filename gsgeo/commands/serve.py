@@ -27,6 +27,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free)")
     p.add_argument("--web", default=None, metavar="DIR",
                    help="web client directory (default: the repository's web/)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="worker processes (default 1; more use more CPU cores, sharing the "
+                        "SQLite store)")
     p.add_argument("--log-level", default="warning",
                    choices=["critical", "error", "warning", "info", "debug"])
     p.set_defaults(run=run)
@@ -46,7 +49,7 @@ def resolve_token(host: str, environ: dict | None = None) -> tuple[str | None, b
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from gsgeo.server.app import ServerConfig, create_app
+    from gsgeo.server.app import CONFIG_ENV, ServerConfig, config_to_env, create_app
 
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port must be between 0 and 65535, got {args.port}")
@@ -58,13 +61,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"gsgeo serve: bound to {args.host}: API token {token}\n"
               f"  send it as 'Authorization: Bearer {token}' or open "
               f"http://{args.host}:{args.port}/#token={token}", file=sys.stderr, flush=True)
+    if not 1 <= args.workers <= 64:
+        raise InputError(f"--workers must be between 1 and 64, got {args.workers}")
     config = ServerConfig(data_dir=data, host=args.host, port=args.port, token=token,
                           web_dir=Path(args.web) if args.web else None)
-    app = create_app(config)
-    server = uvicorn.Server(uvicorn.Config(app, host=args.host, port=args.port,
-                                           log_level=args.log_level, server_header=False,
-                                           limit_concurrency=1000, timeout_keep_alive=30))
+    app = create_app(config)  # opens (and migrates) the store before accepting requests
+    common = {"host": args.host, "port": args.port, "log_level": args.log_level,
+              "server_header": False, "limit_concurrency": 1000, "timeout_keep_alive": 30}
     print(f"gsgeo serve: data {data.resolve()}; http://{args.host}:{args.port}/ "
           "(API docs at /docs)", file=sys.stderr, flush=True)
-    server.run()
+    if args.workers == 1:
+        uvicorn.Server(uvicorn.Config(app, **common)).run()
+    else:
+        os.environ[CONFIG_ENV] = config_to_env(config)
+        uvicorn.run("gsgeo.server.app:app_from_env", factory=True, workers=args.workers,
+                    **common)
     return 0

@@ -5,7 +5,9 @@
 
 from __future__ import annotations
 
+import json
 import logging
+import os
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -206,4 +208,27 @@ def _safe_name(name: str) -> bool:
     return bool(SLUG.match(name))
 
 
-__all__ = ["ServerConfig", "create_app"]
+CONFIG_ENV = "GSGEO_SERVE_CONFIG"
+
+
+def config_to_env(config: ServerConfig) -> str:
+    """The config as JSON, for worker processes started by uvicorn (``app_from_env``)."""
+    return json.dumps({"data_dir": str(config.data_dir), "host": config.host,
+                       "port": config.port, "token": config.token,
+                       "web_dir": str(config.web_dir), "cesium_dir": str(config.cesium_dir),
+                       "max_body": config.max_body, "max_upload": config.max_upload,
+                       "allowed_hosts": sorted(config.allowed_hosts)
+                       if config.allowed_hosts is not None else None})
+
+
+def app_from_env() -> FastAPI:
+    """Application factory for uvicorn worker processes (``gsgeo serve --workers N``)."""
+    doc = json.loads(os.environ[CONFIG_ENV])
+    for key in ("data_dir", "web_dir", "cesium_dir"):
+        doc[key] = Path(doc[key])
+    if doc["allowed_hosts"] is not None:
+        doc["allowed_hosts"] = set(doc["allowed_hosts"])
+    return create_app(ServerConfig(**doc))
+
+
+__all__ = ["ServerConfig", "app_from_env", "config_to_env", "create_app"]

@@ -251,6 +251,7 @@ class SQLiteStore(Store):
         self._local = threading.local()
         self._connections: list[sqlite3.Connection] = []
         self._lock = threading.Lock()
+        self._write_lock = threading.Lock()
         self._migrate()
 
     def _connect(self) -> sqlite3.Connection:
@@ -318,18 +319,24 @@ class SQLiteStore(Store):
             finally:
                 self._local.depth -= 1
             return
-        con.execute("BEGIN IMMEDIATE" if write else "BEGIN")
-        self._local.depth = 1
+        if write:  # queue this process's writers here rather than in SQLite's busy sleeps
+            self._write_lock.acquire()
         try:
-            yield SQLiteTransaction(con)
-        except BaseException:
-            if con.in_transaction:
-                con.execute("ROLLBACK")
-            raise
-        else:
-            con.execute("COMMIT")
+            con.execute("BEGIN IMMEDIATE" if write else "BEGIN")
+            self._local.depth = 1
+            try:
+                yield SQLiteTransaction(con)
+            except BaseException:
+                if con.in_transaction:
+                    con.execute("ROLLBACK")
+                raise
+            else:
+                con.execute("COMMIT")
+            finally:
+                self._local.depth = 0
         finally:
-            self._local.depth = 0
+            if write:
+                self._write_lock.release()
 
     def check_integrity(self) -> list[str]:
         con = self._connect()

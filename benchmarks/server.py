@@ -1,0 +1,267 @@
+"""Benchmark `gsgeo serve` on loopback: POST /api/intersect latency and tile throughput.
+
+    python benchmarks/server.py [--clients 50] [--requests 40] [--think 0.5] [--seconds 10]
+
+1. Intersect latency: 50 concurrent clients (threads with keep-alive httpx clients) each
+   send `--requests` POST /api/intersect requests of a 5-ray point (angular model, output in
+   EPSG:27700). Two load models:
+   - "operators": each client waits an exponential think time (mean `--think` s) between
+     requests, like people clicking;
+   - "saturation": no think time (closed loop), which measures the server's capacity.
+   Reported: p50, p90, p99, max latency (ms) and requests/s.
+2. Tile throughput: the same scene files fetched for `--seconds` by 8 concurrent clients from
+   gsgeo serve (/scenes/<name>/...) and from `python -m http.server` on the scene directory,
+   in the same run. The scene is ../shared/data/white-sculpture when present, else a
+   synthetic one of 16 files of 1 MiB.
+
+Everything runs on 127.0.0.1; client and servers share the machine, so the figures are a
+lower bound for a dedicated server.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_SCENE = REPO.parent / "shared" / "data" / "white-sculpture"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_up(url: str, proc: subprocess.Popen, timeout: float = 60) -> None:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if proc.poll() is not None:
+            raise RuntimeError(f"server exited: {proc.stderr.read() if proc.stderr else ''}")
+        try:
+            httpx.get(url, timeout=1)
+            return
+        except httpx.HTTPError:
+            time.sleep(0.1)
+    raise RuntimeError(f"{url} did not come up")
+
+
+def point_rays(rng: np.random.Generator, n: int = 5) -> list[dict]:
+    """n rays at a random point near London, 1 px aiming noise, ifov 1 mrad."""
+    import pyproj
+
+    t = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
+    lon, lat = -0.1276 + rng.uniform(-1e-3, 1e-3), 51.5072 + rng.uniform(-1e-3, 1e-3)
+    x = np.array(t.transform(lon, lat, 50.0))
+    up = x / np.linalg.norm(x)
+    east = np.cross([0, 0, 1.0], up)
+    east /= np.linalg.norm(east)
+    north = np.cross(up, east)
+    rays = []
+    for k in range(n):
+        az = 2 * np.pi * k / n
+        o = x + 30 * (np.cos(az) * east + np.sin(az) * north) + 20 * up
+        d = (x - o) / np.linalg.norm(x - o) + rng.normal(0, 1e-3, 3)
+        rays.append({"origin": o.tolist(), "direction": d.tolist(), "ifov": 1e-3})
+    return rays
+
+
+def latency_run(base: str, clients: int, requests: int, think: float, seed: int) -> dict:
+    rng = np.random.default_rng(seed)
+    bodies = [{"rays": point_rays(rng), "crs": "EPSG:27700", "sigma_px": 1.0}
+              for _ in range(64)]
+    lat: list[float] = []
+    errors = 0
+    lock = threading.Lock()
+    barrier = threading.Barrier(clients)
+
+    def client(c: int) -> None:
+        nonlocal errors
+        r = random.Random(seed * 1000 + c)
+        local, bad = [], 0
+        with httpx.Client(base_url=base, timeout=60) as h:
+            h.post("/api/intersect", json=bodies[0])  # connect and warm up
+            barrier.wait()
+            for i in range(requests):
+                if think > 0:
+                    time.sleep(r.expovariate(1.0 / think))
+                t0 = time.perf_counter()
+                resp = h.post("/api/intersect", json=bodies[(c + i) % len(bodies)])
+                local.append(time.perf_counter() - t0)
+                bad += resp.status_code != 200
+        with lock:
+            lat.extend(local)
+            errors += bad
+
+    threads = [threading.Thread(target=client, args=(c,)) for c in range(clients)]
+    t0 = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    wall = time.perf_counter() - t0
+    a = np.array(lat) * 1000
+    return {"requests": int(a.size), "errors": errors, "p50_ms": float(np.percentile(a, 50)),
+            "p90_ms": float(np.percentile(a, 90)), "p99_ms": float(np.percentile(a, 99)),
+            "max_ms": float(a.max()), "req_per_s": a.size / wall, "latencies_ms": a.tolist()}
+
+
+def throughput_run(urls: list[str], seconds: float, clients: int = 8) -> dict:
+    stop = time.perf_counter() + seconds
+    counts = []
+    lock = threading.Lock()
+
+    def client(c: int) -> None:
+        n = nbytes = 0
+        with httpx.Client(timeout=60) as h:
+            i = c
+            while time.perf_counter() < stop:
+                r = h.get(urls[i % len(urls)])
+                r.raise_for_status()
+                n += 1
+                nbytes += len(r.content)
+                i += 1
+        with lock:
+            counts.append((n, nbytes))
+
+    threads = [threading.Thread(target=client, args=(c,)) for c in range(clients)]
+    t0 = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    wall = time.perf_counter() - t0
+    n = sum(c[0] for c in counts)
+    b = sum(c[1] for c in counts)
+    return {"requests": n, "req_per_s": n / wall, "MiB_per_s": b / wall / 2**20}
+
+
+def make_scene(root: Path) -> Path:
+    if (SHARED_SCENE / "tileset.json").is_file():
+        (root / "scenes").mkdir(parents=True, exist_ok=True)
+        os.symlink(SHARED_SCENE, root / "scenes" / "bench")
+        return root / "scenes" / "bench"
+    scene = root / "scenes" / "bench"
+    scene.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    (scene / "tileset.json").write_text(json.dumps({"asset": {"version": "1.1"}, "root": {}}))
+    for k in range(16):
+        (scene / f"tile_{k}.glb").write_bytes(rng.bytes(2**20))
+    return scene
+
+
+def plot(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for name, r in results["intersect"].items():
+        a = np.sort(np.array(r["latencies_ms"]))
+        ax.plot(a, np.arange(1, a.size + 1) / a.size, label=f"{name} (p99 {r['p99_ms']:.1f} ms)")
+    ax.axvline(25, color="grey", ls="--", lw=1, label="target p99 25 ms")
+    ax.set_xscale("log")
+    ax.set_xlabel("POST /api/intersect latency (ms)")
+    ax.set_ylabel("fraction of requests")
+    ax.set_title(f"{results['clients']} concurrent clients on loopback")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--clients", type=int, default=50)
+    ap.add_argument("--requests", type=int, default=40, help="requests per client")
+    ap.add_argument("--think", type=float, default=0.5, help="mean think time, s (operators)")
+    ap.add_argument("--seconds", type=float, default=10.0, help="tile throughput duration")
+    ap.add_argument("--workers", type=int, default=1, help="gsgeo serve --workers")
+    ap.add_argument("--plot", default=str(REPO / "benchmarks" / "server_latency.png"))
+    ap.add_argument("--json", default=None, help="write the figures here")
+    args = ap.parse_args()
+
+    tmp = Path(tempfile.mkdtemp(prefix="gsgeo-bench-"))
+    procs = []
+    try:
+        scene = make_scene(tmp / "data")
+        port, hport = free_port(), free_port()
+        cmd = [sys.executable, "-m", "gsgeo", "serve", "--data", str(tmp / "data"),
+               "--port", str(port)]
+        if args.workers > 1:
+            cmd += ["--workers", str(args.workers)]
+        gs = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              text=True)
+        procs.append(gs)
+        hs = subprocess.Popen([sys.executable, "-m", "http.server", str(hport), "--bind",
+                               "127.0.0.1", "--directory", str(scene.resolve())],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        procs.append(hs)
+        base = f"http://127.0.0.1:{port}"
+        wait_up(base + "/api/info", gs)
+        wait_up(f"http://127.0.0.1:{hport}/tileset.json", hs)
+
+        results: dict = {"clients": args.clients, "cpus": os.cpu_count(),
+                         "workers": args.workers, "intersect": {}, "tiles": {}}
+        print(f"gsgeo serve on {base} ({args.workers} worker(s)); {os.cpu_count()} CPUs",
+              file=sys.stderr)
+        for name, think in (("operators", args.think), ("saturation", 0.0)):
+            print(f"intersect, {name}: {args.clients} clients x {args.requests} requests...",
+                  file=sys.stderr)
+            r = latency_run(base, args.clients, args.requests, think, seed=1)
+            results["intersect"][name] = r
+            print(f"  p50 {r['p50_ms']:.1f} ms  p90 {r['p90_ms']:.1f} ms  p99 {r['p99_ms']:.1f} ms"
+                  f"  max {r['max_ms']:.1f} ms  {r['req_per_s']:.0f} req/s  errors {r['errors']}",
+                  file=sys.stderr)
+
+        files = sorted(p.name for p in scene.iterdir() if p.is_file())
+        for name, url in (("gsgeo serve", f"{base}/scenes/bench/"),
+                          ("python -m http.server", f"http://127.0.0.1:{hport}/")):
+            print(f"tiles, {name}: {len(files)} files, {args.seconds:.0f} s...", file=sys.stderr)
+            r = throughput_run([url + f for f in files], args.seconds)
+            results["tiles"][name] = r
+            print(f"  {r['req_per_s']:.0f} req/s  {r['MiB_per_s']:.0f} MiB/s", file=sys.stderr)
+        if args.plot:
+            plot(results, Path(args.plot))
+            print(f"plot: {args.plot}", file=sys.stderr)
+        if args.json:
+            slim = json.loads(json.dumps(results))
+            for r in slim["intersect"].values():
+                r.pop("latencies_ms")
+            Path(args.json).write_text(json.dumps(slim, indent=2))
+        print("\n| load | requests | p50 ms | p90 ms | p99 ms | max ms | req/s |")
+        print("|---|---|---|---|---|---|---|")
+        for name, r in results["intersect"].items():
+            print(f"| {name} | {r['requests']} | {r['p50_ms']:.1f} | {r['p90_ms']:.1f} | "
+                  f"{r['p99_ms']:.1f} | {r['max_ms']:.1f} | {r['req_per_s']:.0f} |")
+        print("\n| tile server | req/s | MiB/s |")
+        print("|---|---|---|")
+        for name, r in results["tiles"].items():
+            print(f"| {name} | {r['req_per_s']:.0f} | {r['MiB_per_s']:.0f} |")
+    finally:
+        for p in procs:
+            p.terminate()
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
