@@ -95,11 +95,10 @@ def georeference_from_args(args: argparse.Namespace):
         g = Georeference("crs", crs=args.crs, offset=_floats(args.offset, 3, "--offset"),
                          height=height, vertical_crs=args.vertical, geoid=args.geoid,
                          axes=args.axes)
-        if height == "ellipsoidal" and not args.height and "compound" not in g.describe():
-            import pyproj
-            if not pyproj.CRS.from_user_input(args.crs).is_compound:
-                g.warnings.append("heights taken as ellipsoidal (no --vertical or --geoid "
-                                  "given); pass --height ellipsoidal to silence this")
+        # a compound --crs switches to its vertical part; a 2-D one assumes ellipsoidal
+        if g.height == "ellipsoidal" and not args.height:
+            g.warnings.append("heights taken as ellipsoidal (no --vertical or --geoid "
+                              "given); pass --height ellipsoidal to silence this")
         return g
     if args.transform:
         return Georeference("transform", matrix=load_matrix(args.transform), axes=args.axes)

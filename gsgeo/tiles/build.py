@@ -15,6 +15,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,6 +27,11 @@ from gsgeo.errors import InputError
 from gsgeo.tiles import gltf, lod, ply, spz
 from gsgeo.tiles.georef import Georeference, ecef_to_geodetic
 from gsgeo.tiles.splats import Splats
+
+
+#: The scene centre (origin of the root ENU frame) is the centre of the bounding box of this
+#: many splat centres spread through the file; the true extent is checked after reading.
+CENTRE_SAMPLE = 65_536
 
 
 @dataclass
@@ -129,7 +135,8 @@ def _source(path: Path, block: int):
         raise InputError(f"{path}: unsupported input; expected a .ply or .spz file")
     layout = ply.read_layout(path)
     return (layout.count, layout.sh_degree, layout.size_bytes,
-            lambda: ply.ply_bounds(layout), lambda: ply.iter_ply(layout, block))
+            lambda: ply.ply_bounds(layout, sample=CENTRE_SAMPLE),
+            lambda: ply.iter_ply(layout, block))
 
 
 def _prepare_outdir(outdir: Path, overwrite: bool) -> Path:
@@ -221,6 +228,9 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
     if count == 0:
         raise InputError(f"{src}: the file holds no splats")
     lo, hi, n_finite = bounds()
+    if n_finite == 0:   # the sample may have missed the few finite ones: look at all
+        lo, hi, n_finite = ply.ply_bounds(ply.read_layout(src)) if src.suffix.lower() == \
+            ".ply" else (lo, hi, 0)
     if n_finite == 0:
         raise InputError(f"{src}: no splat has finite coordinates")
     placement = georef.placement(lo, hi)
@@ -235,18 +245,24 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
                             np.empty((count, 3 * k), np.uint8))
         bar = Progress(progress, count, "reading")
         n = 0
-        for s in blocks():
-            bar.update(s.count)
+
+        def prepare(s: Splats) -> spz.SpzBytes | None:
             ok = s.finite_mask()
             if not ok.all():
                 s = s.take(ok)
-            if not s.count:
-                continue
-            q = spz.quantize(placement.apply(s), spz_version)
-            m = q.count
-            for f in ("positions", "alphas", "colors", "scales", "rotations", "sh"):
-                getattr(held, f)[n:n + m] = getattr(q, f)
-            n += m
+            return spz.quantize(placement.apply(s), spz_version) if s.count else None
+
+        nthreads = workers or os.cpu_count() or 2
+        with ThreadPoolExecutor(max_workers=nthreads) as pool:
+            pending: deque = deque()
+            # numpy releases the GIL in its loops: blocks are turned and quantised in
+            # parallel, at most nthreads + 1 in flight (bounded memory), kept in file order
+            for s in blocks():
+                pending.append((pool.submit(prepare, s), s.count))
+                while len(pending) > nthreads:
+                    n = _store(held, n, *pending.popleft(), bar)
+            while pending:
+                n = _store(held, n, *pending.popleft(), bar)
         bar.close()
         dropped = count - n
         if n == 0:
@@ -302,6 +318,17 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
         raise
     summary.seconds = time.monotonic() - t0
     return summary
+
+
+def _store(held: spz.SpzBytes, n: int, fut, block_count: int, bar: Progress) -> int:
+    q = fut.result()
+    bar.update(block_count)
+    if q is None:
+        return n
+    m = q.count
+    for f in ("positions", "alphas", "colors", "scales", "rotations", "sh"):
+        getattr(held, f)[n:n + m] = getattr(q, f)
+    return n + m
 
 
 def _corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

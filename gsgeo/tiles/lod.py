@@ -66,7 +66,8 @@ def _split(pos: np.ndarray, idx: np.ndarray) -> list[np.ndarray]:
             order = np.argpartition(p[part, a], half)
             nxt += [part[order[:half]], part[order[half:]]]
         parts = nxt
-    return [idx[part] for part in parts if part.shape[0]]
+    # sorted indices keep later gathers (pos[idx], attributes per tile) close to sequential
+    return [np.sort(idx[part]) for part in parts if part.shape[0]]
 
 
 def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
@@ -81,9 +82,11 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
     idx_dtype = np.int32 if n < 2**31 else np.int64
 
     def box(idx):
-        r = radius[idx][:, None]
+        # centres' box grown by the largest splat radius: a little loose, but cheap, and
+        # a parent's box still contains its children's
         p = pos[idx]
-        return (p - r).min(axis=0), (p + r).max(axis=0)
+        r = radius[idx].max()
+        return p.min(axis=0) - r, p.max(axis=0) + r
 
     root_idx = np.arange(n, dtype=idx_dtype)
     lo, hi = box(root_idx) if n else (np.zeros(3), np.zeros(3))

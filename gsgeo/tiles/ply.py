@@ -143,8 +143,9 @@ def _records_to_splats(rec: np.ndarray, layout: PlyLayout) -> Splats:
         def cols(sel: list[str], dt=np.float32) -> np.ndarray:
             ix = [names.index(s) for s in sel]
             if ix == list(range(ix[0], ix[0] + len(ix))):
-                return mat[:, ix[0]:ix[0] + len(ix)].astype(dt)
-            return mat[:, ix].astype(dt)
+                # a view when the type matches (each block has its own buffer)
+                return mat[:, ix[0]:ix[0] + len(ix)].astype(dt, copy=False)
+            return mat[:, ix].astype(dt, copy=False)
     else:
         def cols(sel: list[str], dt=np.float32) -> np.ndarray:
             out = np.empty((n, len(sel)), dt)
@@ -181,15 +182,15 @@ def iter_records(layout: PlyLayout, block: int = 262_144) -> Iterator[np.ndarray
     size = layout.dtype.itemsize
     with open(layout.path, "rb") as f:
         f.seek(layout.data_offset)
-        buf = bytearray(block * size)
         left = layout.count
         while left > 0:
             m = min(block, left)
-            view = memoryview(buf)[: m * size]
-            got = f.readinto(view)
+            # a fresh buffer per block: blocks are consumed concurrently and keep views of it
+            rec = np.empty(m, layout.dtype)
+            got = f.readinto(memoryview(rec.view(np.uint8)))
             if got != m * size:
                 raise InputError(f"{layout.path}: file ended inside the vertex data")
-            yield np.frombuffer(buf, layout.dtype, count=m)
+            yield rec
             left -= m
 
 
@@ -199,15 +200,24 @@ def iter_ply(layout: PlyLayout, block: int = 262_144) -> Iterator[Splats]:
         yield _records_to_splats(rec, layout)
 
 
-def ply_bounds(layout: PlyLayout, block: int = 1_048_576) -> tuple[np.ndarray, np.ndarray, int]:
-    """Min and max of the finite x, y, z (float64) and the number of finite centres."""
+def ply_bounds(layout: PlyLayout, sample: int | None = None,
+               block: int = 1_048_576) -> tuple[np.ndarray, np.ndarray, int]:
+    """Min and max of the finite x, y, z (float64) and the number of finite centres looked at.
+
+    With ``sample``, only about that many records spread evenly through the file are read
+    (enough to find the scene centre without a pass over the whole file).
+    """
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     n = 0
     if layout.fmt != "ascii":
-        # a read-only map: only the pages holding x, y, z are touched, block by block
+        # a read-only map: only the pages holding the records looked at are touched
         mm = np.memmap(layout.path, layout.dtype, "r", layout.data_offset, (layout.count,))
-        chunks = (mm[i:i + block] for i in range(0, layout.count, block))
+        if sample is not None and layout.count > sample:
+            step = layout.count // sample
+            chunks = [mm[::step]]
+        else:
+            chunks = (mm[i:i + block] for i in range(0, layout.count, block))
     else:
         mm, chunks = None, iter_records(layout, block)
     for rec in chunks:

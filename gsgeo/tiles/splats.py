@@ -60,7 +60,9 @@ class Splats:
         ok &= np.isfinite(self.opacities)
         ok &= np.isfinite(self.colors).all(axis=1)
         if self.sh.shape[1]:
-            ok &= np.isfinite(self.sh).all(axis=(1, 2))
+            # a sum is NaN/inf when any term is (finite values overflow only beyond 1e36)
+            with np.errstate(over="ignore", invalid="ignore"):
+                ok &= np.isfinite(self.sh.sum(axis=(1, 2)))
         return ok
 
 

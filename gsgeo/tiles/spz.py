@@ -63,33 +63,39 @@ class SpzBytes:
 
 
 def _u8(x: np.ndarray) -> np.ndarray:
-    return np.clip(np.rint(x), 0, 255).astype(np.uint8)
+    """Round and clamp to bytes; works in place on float temporaries."""
+    x = np.asarray(x, np.float32)
+    np.rint(x, out=x)
+    np.clip(x, 0, 255, out=x)
+    return x.astype(np.uint8)
+
+
+def _sh_buckets(k: int) -> np.ndarray:
+    """Bucket size per SH coefficient: 8 (5 bits) for degree 1, 16 (4 bits) for 2-3."""
+    bits = np.array([SH_BITS[0]] * 3 + [SH_BITS[1]] * 12)[:k]
+    return (1 << (8 - bits)).astype(np.float32)
 
 
 def _quantize_sh(sh: np.ndarray) -> np.ndarray:
-    """SH floats (N, K, 3) to bytes (N, K*3), degree 1 kept to 5 bits and 2-3 to 4 bits
-    (bytes are multiples of the bucket, as the reference encoder writes them)."""
+    """SH floats (N, K, 3) to bytes (N, K*3): round(x·128 + 128) to the nearest multiple of
+    the coefficient's bucket (the reference encoder's precision), clamped to 0..255."""
     n, k, _ = sh.shape
+    if k == 0:
+        return np.zeros((n, 0), np.uint8)
+    bucket = _sh_buckets(k)
     # work in memory order: PLY blocks arrive as a transposed view of (N, 3, K)
     channel_major = sh.transpose(0, 2, 1)
-    work = channel_major if channel_major.flags.c_contiguous else sh
-    coeff_axis = 2 if work is channel_major else 1
-    out = np.empty(work.shape, np.uint8)
-    for (lo, hi), bits in (((0, 3), SH_BITS[0]), ((3, 15), SH_BITS[1])):
-        hi = min(hi, k)
-        if lo >= hi:
-            continue
-        sl = (slice(None), slice(None), slice(lo, hi)) if coeff_axis == 2 else \
-            (slice(None), slice(lo, hi), slice(None))
-        bucket = float(1 << (8 - bits))
-        # round(x·128 + 128) to the nearest multiple of the bucket, in float32
-        v = work[sl] * np.float32(128.0 / bucket)
-        v += np.float32(128.0 / bucket + 0.5)
-        np.floor(v, out=v)
-        v *= np.float32(bucket)
-        np.clip(v, 0, 255, out=v)
-        out[sl] = v
-    if coeff_axis == 2:
+    if channel_major.flags.c_contiguous:
+        work, b = channel_major, bucket
+    else:
+        work, b = sh, bucket[:, None]
+    v = work * (np.float32(128.0) / b)
+    v += np.float32(128.0) / b + np.float32(0.5)
+    np.floor(v, out=v)
+    v *= b
+    np.clip(v, 0, 255, out=v)
+    out = v.astype(np.uint8)
+    if work is channel_major:
         out = out.transpose(0, 2, 1)
     return np.ascontiguousarray(out).reshape(n, k * 3)
 
@@ -224,9 +230,10 @@ def decode(data: bytes) -> tuple[Splats, dict]:
     fixed = p[:, :, 0] | (p[:, :, 1] << 8) | (p[:, :, 2] << 16)
     fixed = np.where(fixed & 0x800000, fixed - (1 << 24), fixed)
     positions = fixed.astype(np.float64) / (1 << frac)
-    alpha = arrs[1].astype(np.float32) / 255.0
-    with np.errstate(divide="ignore"):
-        opac = np.log(alpha) - np.log1p(-alpha)
+    # bytes 0 and 255 would be infinite logits; a quarter step keeps them finite and
+    # re-encodes to the same byte
+    alpha = np.clip(arrs[1].astype(np.float32), 0.25, 254.75) / 255.0
+    opac = np.log(alpha) - np.log1p(-alpha)
     colors = (arrs[2].reshape(n, 3).astype(np.float32) / 255.0 - 0.5) / COLOR_SCALE
     scales = arrs[3].reshape(n, 3).astype(np.float32) / 16.0 - 10.0
     if version == 3:

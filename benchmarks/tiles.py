@@ -1,0 +1,181 @@
+"""Benchmark `gsgeo tiles` against `@playcanvas/splat-transform` (PLY -> SPZ) in one run.
+
+    python benchmarks/tiles.py [--sizes 1000000,5000000] [--skip-splat-transform]
+
+Inputs (written to benchmarks/out/, git-ignored):
+- real.ply: the shared real scene (../shared/data/white-sculpture, 690 573 splats, SH 3)
+  rebuilt as an INRIA PLY in its root ENU frame (171 MB);
+- synth_<N>.ply: SH-3 PLYs of N splats made of copies of the real scene side by side, each
+  copy with jittered centres, so they compress like real data (random values would not).
+  Without the shared data, random splats are used instead (and the table says so).
+
+Each tool runs as a separate process under /usr/bin/time: wall time, splats/s, peak RSS
+against the bound 1.5 x input + 300 MB, output size. gsgeo runs with its defaults (gzip
+level 1 through ISA-L, one worker thread per CPU, georeference by --transform for real.ply
+and by --origin for the synthetic ones); splat-transform writes one .spz (no tiling).
+Results: benchmarks/out/tiles.json and a Markdown table on stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+OUT = HERE / "out"
+SHARED = REPO.parent / "shared" / "data" / "white-sculpture"
+SPLAT_TRANSFORM = HERE / "node" / "node_modules" / ".bin" / "splat-transform"
+
+sys.path.insert(0, str(REPO))
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def real_splats():
+    from tests.tiles_real import real_root_frame
+    return real_root_frame(SHARED)
+
+
+def make_inputs(sizes: list[int]) -> list[tuple[str, Path, list[str]]]:
+    from gsgeo.tiles.ply import write_ply
+    from gsgeo.tiles.splats import Splats
+    OUT.mkdir(parents=True, exist_ok=True)
+    inputs = []
+    have_real = (SHARED / "tileset.json").is_file()
+    base = None
+    if have_real:
+        real_ply = OUT / "real.ply"
+        if not real_ply.exists():
+            _log("writing real.ply ...")
+            base, root = real_splats()
+            write_ply(real_ply, base)
+            (OUT / "real_root.json").write_text(json.dumps(root.T.reshape(-1).tolist()))
+        inputs.append(("real scene", real_ply, ["--transform", str(OUT / "real_root.json")]))
+    rng = np.random.default_rng(5)
+    for n in sizes:
+        path = OUT / f"synth_{n}.ply"
+        if not path.exists():
+            _log(f"writing {path.name} ...")
+            if have_real:
+                if base is None:
+                    base, _ = real_splats()
+                reps = -(-n // base.count)
+                side = int(np.ceil(np.sqrt(reps)))
+                parts = []
+                for r in range(reps):
+                    m = min(base.count, n - r * base.count)
+                    s = base.take(slice(0, m))
+                    shift = np.array([(r % side) * 120.0, (r // side) * 120.0, 0.0])
+                    jitter = rng.normal(scale=0.002, size=(m, 3))
+                    parts.append(Splats(s.positions + shift + jitter, s.scales, s.rotations,
+                                        s.opacities, s.colors, s.sh))
+                s = Splats.concatenate(parts)
+            else:
+                from tests.tiles_helpers import random_splats
+                s = random_splats(rng, n, 3, extent=200.0)
+            write_ply(path, s)
+            del s
+        inputs.append((f"synthetic {n / 1e6:g} M" + ("" if have_real else " (random)"), path,
+                       ["--origin", "40.0,-83.0,200"]))
+    return inputs
+
+
+def timed(cmd: list[str], cwd: Path | None = None) -> dict:
+    tf = OUT / "time.txt"
+    t0 = time.monotonic()
+    proc = subprocess.run(["/usr/bin/time", "-f", "%e %M %U %S", "-o", str(tf)] + cmd,
+                          cwd=cwd, capture_output=True, text=True)
+    wall = time.monotonic() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"{cmd[0]} failed ({proc.returncode}): {proc.stderr[-2000:]}")
+    e, m, u, s = tf.read_text().split()[-4:]
+    return {"wall_s": float(e) if float(e) > 0 else wall, "peak_rss_mb": int(m) / 1024,
+            "cpu_s": float(u) + float(s), "stdout": proc.stdout}
+
+
+def _size_mb(p: Path) -> float:
+    if p.is_dir():
+        return sum(f.stat().st_size for f in p.rglob("*") if f.is_file()) / 1e6
+    return p.stat().st_size / 1e6
+
+
+def count(path: Path) -> int:
+    from gsgeo.tiles.ply import read_layout
+    return read_layout(path).count
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sizes", default="1000000,5000000")
+    ap.add_argument("--skip-splat-transform", action="store_true")
+    ap.add_argument("--levels", default="1", help="gzip levels for gsgeo, e.g. 1,6")
+    args = ap.parse_args()
+    sizes = [int(s) for s in args.sizes.split(",") if s]
+    inputs = make_inputs(sizes)
+    st_ok = SPLAT_TRANSFORM.exists() and not args.skip_splat_transform
+    if not st_ok and not args.skip_splat_transform:
+        _log("splat-transform not installed (cd benchmarks/node && npm ci); skipping it")
+    rows = []
+    for label, path, georef in inputs:
+        n = count(path)
+        in_mb = path.stat().st_size / 1e6
+        bound = 1.5 * path.stat().st_size / 2**20 + 300
+        for level in [int(v) for v in args.levels.split(",")]:
+            out = OUT / f"tiles_{path.stem}_l{level}"
+            _log(f"gsgeo tiles {path.name} (level {level}) ...")
+            r = timed([sys.executable, "-m", "gsgeo", "tiles", str(path), "-o", str(out),
+                       "--overwrite", "--quiet", "--json", "--level", str(level)] + georef)
+            summ = json.loads(r.pop("stdout"))
+            rows.append({"tool": f"gsgeo tiles (gzip {level})", "input": label, "splats": n,
+                         "input_mb": in_mb, **r, "splats_per_s": n / r["wall_s"],
+                         "rss_bound_mb": bound, "output_mb": _size_mb(out),
+                         "tiles": summ["tiles"], "levels": summ["levels"]})
+            shutil.rmtree(out, ignore_errors=True)
+        if st_ok:
+            out = OUT / f"st_{path.stem}.spz"
+            _log(f"splat-transform {path.name} ...")
+            r = timed([str(SPLAT_TRANSFORM), "-q", str(path), str(out)])
+            r.pop("stdout")
+            rows.append({"tool": "splat-transform -> .spz", "input": label, "splats": n,
+                         "input_mb": in_mb, **r, "splats_per_s": n / r["wall_s"],
+                         "rss_bound_mb": bound, "output_mb": _size_mb(out)})
+            out.unlink(missing_ok=True)
+    meta = {"cpus": os.cpu_count(), "python": platform.python_version(),
+            "load_avg_at_end": os.getloadavg(), "date": time.strftime("%Y-%m-%d %H:%M UTC",
+                                                                        time.gmtime())}
+    (OUT / "tiles.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    print(f"CPUs {meta['cpus']}, load average at end {meta['load_avg_at_end'][0]:.1f}, "
+          f"{meta['date']}\n")
+    print("| input | splats | tool | wall s | splats/s | CPU s | peak RSS MB | bound MB | "
+          "output MB |")
+    print("|---|---:|---|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['input']} | {r['splats']:,} | {r['tool']} | {r['wall_s']:.2f} | "
+              f"{r['splats_per_s']:,.0f} | {r['cpu_s']:.1f} | {r['peak_rss_mb']:.0f} | "
+              f"{r['rss_bound_mb']:.0f} | {r['output_mb']:.1f} |")
+    by = {}
+    for r in rows:
+        by.setdefault(r["input"], {})[r["tool"]] = r["wall_s"]
+    for inp, d in by.items():
+        st = d.get("splat-transform -> .spz")
+        g = [v for k, v in d.items() if k.startswith("gsgeo")]
+        if st and g:
+            print(f"\n{inp}: gsgeo is {st / min(g):.1f}x faster than splat-transform", end="")
+    print()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
