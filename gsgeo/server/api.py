@@ -41,6 +41,7 @@ router = APIRouter(prefix="/api", responses={
     409: {"model": ErrorBody, "description": "id already taken, or the point is still in use"},
     413: {"model": ErrorBody, "description": "request body over the size limit"},
     422: {"model": ErrorBody, "description": "malformed request; message names the field"},
+    503: {"model": ErrorBody, "description": "the project store is busy or unavailable"},
 })
 
 PID = Annotated[str, m.Field(description="project id", max_length=64)]

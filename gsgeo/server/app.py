@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import sqlite3
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -112,6 +113,11 @@ def _install_error_handlers(app: FastAPI) -> None:
     async def store_error(_req: Request, exc: StoreError) -> JSONResponse:
         log.error("store error: %s", exc)
         return _error(503, f"the project store is unavailable: {exc}")
+
+    @app.exception_handler(sqlite3.OperationalError)
+    async def store_busy(_req: Request, exc: sqlite3.OperationalError) -> JSONResponse:
+        log.error("store: %s", exc)
+        return _error(503, f"the project store is busy or unavailable ({exc}); try again")
 
     @app.exception_handler(GsgeoError)
     async def gsgeo_error(_req: Request, exc: GsgeoError) -> JSONResponse:
