@@ -288,3 +288,32 @@ def test_kill_9_in_the_middle_of_writes_leaves_a_consistent_store(tmp_path):
         assert q.solved_rev == p.settings_rev
         assert q.record["crs"] == p.crs and q.record["n_rays"] == 3
         assert json.loads(json.dumps(q.result))["point_id"] == q.id
+
+
+def test_a_new_migration_upgrades_an_existing_store_in_place(tmp_path, monkeypatch):
+    """Opening a store of an older schema applies the missing migrations and keeps the data."""
+    import gsgeo.store.sqlite as sq
+
+    s = open_store(tmp_path)
+    with s.transaction() as tx:
+        tx.insert_project(Project(id="p1", name="One"))
+    s.close()
+    extra = "ALTER TABLE projects ADD COLUMN colour TEXT NOT NULL DEFAULT 'red'"
+    monkeypatch.setattr(sq, "MIGRATIONS", [*sq.MIGRATIONS, extra])
+    monkeypatch.setattr(sq, "SCHEMA_VERSION", SCHEMA_VERSION + 1)
+    s = open_store(tmp_path)
+    try:
+        assert s.schema_version == SCHEMA_VERSION + 1
+        with s.transaction(write=False) as tx:
+            assert tx.get_project("p1").name == "One"
+            assert tx.con.execute("SELECT colour FROM projects").fetchone()[0] == "red"
+    finally:
+        s.close()
+    # a failing migration leaves the store at the old version, unharmed
+    monkeypatch.setattr(sq, "MIGRATIONS", [*sq.MIGRATIONS, "CREATE TABLE broken (x"])
+    monkeypatch.setattr(sq, "SCHEMA_VERSION", SCHEMA_VERSION + 2)
+    with pytest.raises(StoreError):
+        open_store(tmp_path)
+    con = sqlite3.connect(tmp_path / DB_NAME)
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION + 1
+    con.close()
