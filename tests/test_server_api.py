@@ -451,6 +451,11 @@ def test_real_scene_origin(white_sculpture, tmp_path):
         s = c.get("/api/scenes").json()["scenes"][0]
     assert s["origin"]["lon"] == pytest.approx(lon, abs=1e-9)
     assert s["origin"]["lat"] == pytest.approx(lat, abs=1e-9)
+    b = s["bounds"]
+    assert b["west"] < lon < b["east"] and b["south"] < lat < b["north"]
+    from gsgeo.tiles.reader import splat_count
+
+    assert s["splat_count"] == splat_count(white_sculpture / "tileset.json") > 0
 
 
 # security ------------------------------------------------------------------------------------
