@@ -205,3 +205,27 @@ def test_model_matrix_scale_keeps_ifov_valid(truth, rng):
     sheared = measure_point(_session_point("S", o_s, d_s, shear), crs="EPSG:27700")
     np.testing.assert_allclose(sheared.point_ecef, plain.point_ecef, atol=1e-6)
     assert any("not a rotation with uniform scale" in w for w in sheared.warnings)
+
+
+def test_point_outside_geoid_fails_alone_missing_grid_fails_the_session(truth, rng, tmp_path):
+    import rasterio
+    from affine import Affine
+
+    p, _ = truth
+    lon, lat, _ = Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True).transform(*p)
+    g = tmp_path / "small.tif"  # a 300 m geoid grid around the truth point
+    tf = Affine(0.001, 0, lon - 0.0015, 0, -0.001, lat + 0.0015)
+    with rasterio.open(g, "w", driver="GTiff", width=3, height=3, count=1, dtype="float32",
+                       crs="EPSG:4326", transform=tf) as ds:
+        ds.write(np.full((3, 3), 47.0, dtype=np.float32), 1)
+    o = camera_origins(p, 3, rng)
+    near = SessionPoint("NEAR", [Ray(a, b) for a, b in zip(o, noisy_directions(o, p, 0, rng), strict=True)])
+    q = Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True).transform(lon + 0.01, lat, 60.0)
+    q = np.array(q)
+    o2 = camera_origins(q, 3, rng)
+    far = SessionPoint("FAR", [Ray(a, b) for a, b in zip(o2, noisy_directions(o2, q, 0, rng), strict=True)])
+    out = measure_session(Session(points=[near, far], crs="EPSG:27700"), geoid=g)
+    assert isinstance(out[0], Measurement) and out[0].grid.height_type == "orthometric"
+    assert isinstance(out[1], MeasurementFailure) and "outside the geoid grid" in out[1].error
+    with pytest.raises(CRSError, match="uk_os_OSGM15_GB.tif"):
+        measure_session(Session(points=[near, far], crs="EPSG:27700", vertical="EPSG:5701"))

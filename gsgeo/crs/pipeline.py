@@ -268,8 +268,9 @@ def measure_session(
 ) -> list[Measurement | MeasurementFailure]:
     """Measure every point of a session; overrides fall back to the session's values.
 
-    A point whose rays cannot be intersected becomes a MeasurementFailure; a CRS problem
-    (unknown CRS, missing geoid grid) raises CRSError once for the whole session.
+    A point that cannot be measured (its rays, or e.g. outside the geoid grid) becomes a
+    MeasurementFailure; a CRS problem of the whole session (unknown CRS, a missing geoid grid
+    that fails every point alike) raises CRSError once.
     """
     crs = crs if crs is not None else session.crs
     vertical = vertical if vertical is not None else session.vertical
@@ -283,12 +284,18 @@ def measure_session(
     elif vertical or geoid:
         raise InputError("a vertical datum (--vertical / --geoid) needs a grid CRS (--crs)")
     out: list[Measurement | MeasurementFailure] = []
+    crs_errors: list[CRSError] = []
     for pt in session.points:
         try:
             out.append(measure_point(pt, crs=crs, vertical=vertical, geoid=geoid,
                                      source_crs=src, sigma_px=s_px))
-        except CRSError:
-            raise
+        except CRSError as exc:
+            # e.g. a point outside the geoid grid; the whole session failing alike (a missing
+            # grid) is raised once below instead
+            crs_errors.append(exc)
+            out.append(MeasurementFailure(pt.id, str(exc)))
         except GsgeoError as exc:
             out.append(MeasurementFailure(pt.id, str(exc)))
+    if crs_errors and len(crs_errors) == len(out) and len({str(e) for e in crs_errors}) == 1:
+        raise crs_errors[0]
     return out
