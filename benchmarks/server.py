@@ -5,8 +5,9 @@
 1. Intersect latency: 50 concurrent clients (threads with keep-alive httpx clients) each
    send `--requests` POST /api/intersect requests of a 5-ray point (angular model, output in
    EPSG:27700). Two load models:
-   - "operators": each client waits an exponential think time (mean `--think` s) between
-     requests, like people clicking;
+   - "operators": each client waits an exponential think time (mean `--think` s, default 2)
+     between requests, like people aiming and clicking (the viewer asks for a live solution
+     at every click);
    - "saturation": no think time (closed loop), which measures the server's capacity.
    Reported: p50, p90, p99, max latency (ms) and requests/s.
 2. Tile throughput: the same scene files fetched for `--seconds` by 8 concurrent clients from
@@ -77,6 +78,25 @@ def point_rays(rng: np.random.Generator, n: int = 5) -> list[dict]:
         d = (x - o) / np.linalg.norm(x - o) + rng.normal(0, 1e-3, 3)
         rays.append({"origin": o.tolist(), "direction": d.tolist(), "ifov": 1e-3})
     return rays
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process and its children (worker processes), seconds."""
+    total = 0.0
+    tick = os.sysconf("SC_CLK_TCK")
+    pids = [pid]
+    try:
+        children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+        pids += [int(c) for c in children]
+    except OSError:
+        pass
+    for p in pids:
+        try:
+            fields = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / tick  # utime, stime
+    return total
 
 
 def latency_run(base: str, clients: int, requests: int, think: float, seed: int) -> dict:
@@ -188,7 +208,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--clients", type=int, default=50)
     ap.add_argument("--requests", type=int, default=40, help="requests per client")
-    ap.add_argument("--think", type=float, default=0.5, help="mean think time, s (operators)")
+    ap.add_argument("--think", type=float, default=2.0,
+                    help="mean think time between an operator's requests, s")
     ap.add_argument("--seconds", type=float, default=10.0, help="tile throughput duration")
     ap.add_argument("--workers", type=int, default=1, help="gsgeo serve --workers")
     ap.add_argument("--plot", default=str(REPO / "benchmarks" / "server_latency.png"))
@@ -215,17 +236,21 @@ def main() -> int:
         wait_up(base + "/api/info", gs)
         wait_up(f"http://127.0.0.1:{hport}/tileset.json", hs)
 
-        results: dict = {"clients": args.clients, "cpus": os.cpu_count(),
+        print(f"load average at the start: {os.getloadavg()[0]:.1f} (1 min)", file=sys.stderr)
+        results: dict = {"clients": args.clients, "loadavg_start": os.getloadavg()[0], "cpus": os.cpu_count(),
                          "workers": args.workers, "intersect": {}, "tiles": {}}
         print(f"gsgeo serve on {base} ({args.workers} worker(s)); {os.cpu_count()} CPUs",
               file=sys.stderr)
         for name, think in (("operators", args.think), ("saturation", 0.0)):
             print(f"intersect, {name}: {args.clients} clients x {args.requests} requests...",
                   file=sys.stderr)
+            cpu0 = cpu_seconds(gs.pid)
             r = latency_run(base, args.clients, args.requests, think, seed=1)
+            r["server_cpu_ms_per_request"] = (cpu_seconds(gs.pid) - cpu0) * 1000 / r["requests"]
             results["intersect"][name] = r
             print(f"  p50 {r['p50_ms']:.1f} ms  p90 {r['p90_ms']:.1f} ms  p99 {r['p99_ms']:.1f} ms"
-                  f"  max {r['max_ms']:.1f} ms  {r['req_per_s']:.0f} req/s  errors {r['errors']}",
+                  f"  max {r['max_ms']:.1f} ms  {r['req_per_s']:.0f} req/s  errors {r['errors']}"
+                  f"  server CPU {r['server_cpu_ms_per_request']:.1f} ms/request",
                   file=sys.stderr)
 
         files = sorted(p.name for p in scene.iterdir() if p.is_file())
@@ -243,11 +268,13 @@ def main() -> int:
             for r in slim["intersect"].values():
                 r.pop("latencies_ms")
             Path(args.json).write_text(json.dumps(slim, indent=2))
-        print("\n| load | requests | p50 ms | p90 ms | p99 ms | max ms | req/s |")
-        print("|---|---|---|---|---|---|---|")
+        print(f"\nload average at the end: {os.getloadavg()[0]:.1f} (1 min)")
+        print("\n| load | requests | p50 ms | p90 ms | p99 ms | max ms | req/s | server CPU ms/req |")
+        print("|---|---|---|---|---|---|---|---|")
         for name, r in results["intersect"].items():
             print(f"| {name} | {r['requests']} | {r['p50_ms']:.1f} | {r['p90_ms']:.1f} | "
-                  f"{r['p99_ms']:.1f} | {r['max_ms']:.1f} | {r['req_per_s']:.0f} |")
+                  f"{r['p99_ms']:.1f} | {r['max_ms']:.1f} | {r['req_per_s']:.0f} | "
+                  f"{r['server_cpu_ms_per_request']:.1f} |")
         print("\n| tile server | req/s | MiB/s |")
         print("|---|---|---|")
         for name, r in results["tiles"].items():
