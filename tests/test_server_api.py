@@ -614,3 +614,33 @@ def test_export_errors(client, project):
     expect_422(client.get(f"/api/projects/{pid}/export"), "crs")
     assert client.get(f"/api/projects/{pid}/export",
                       params={"crs": "EPSG:32630", "format": "csv"}).status_code == 200
+
+
+def test_session_import_is_all_or_nothing(client, project):
+    doc = {"crs": "EPSG:27700", "sigma_px": 3.0,  # the project's settings win
+           "points": [{"id": "A", "rays": rays_at(ecef_of(*target(0)), 3)},
+                      {"id": "B", "code": "x", "rays": rays_at(ecef_of(*target(1)), 4)}],
+           "lines": [{"id": "L", "points": ["A", "B"]}]}
+    r = client.post(f"/api/projects/{project}/session", json=doc)
+    assert r.status_code == 201, r.text
+    assert r.json()["imported"] == {"points": 2, "lines": 1, "polygons": 0}
+    pts = client.get(f"/api/projects/{project}/points", params={"summary": True}).json()["points"]
+    assert [p["id"] for p in pts] == ["A", "B"] and "rays" not in pts[0]
+    assert pts[1]["record"]["crs"] == "EPSG:32630" and pts[1]["code"] == "x"
+    # a clash or a bad point refuses everything
+    x = ecef_of(*LONDON)
+    bad = {"points": [{"id": "C", "rays": rays_at(ecef_of(*target(2)), 3)},
+                      {"id": "D", "rays": [{"origin": (x + [0, 0, 10 * k]).tolist(),
+                                            "direction": [1.0, 0, 0]} for k in range(3)]}]}
+    r = client.post(f"/api/projects/{project}/session", json=bad)
+    assert r.status_code == 422 and "points[1]" in r.json()["message"]
+    r = client.post(f"/api/projects/{project}/session", json={"points": doc["points"][:1]})
+    assert r.status_code == 409 and "points[0].id" in r.json()["message"]
+    expect_422(client.post(f"/api/projects/{project}/session",
+                           json={"points": [{"id": "E", "rays": [{"origin": [1, 2, 3]}]}]}),
+               "points[0].rays[0]")
+    expect_422(client.post(f"/api/projects/{project}/session",
+                           json={"points": [], "lines": [{"id": "M", "points": ["A", "Z"]}]}),
+               "lines[0].points[1]")
+    assert [p["id"] for p in client.get(f"/api/projects/{project}/points").json()["points"]] == \
+        ["A", "B"]

@@ -12,7 +12,7 @@ import tempfile
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
+from fastapi import APIRouter, Body, File, Form, Query, Request, Response, UploadFile
 from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
 
@@ -171,10 +171,26 @@ def get_session(pid: PID, request: Request) -> dict[str, Any]:
                          for f, _ in s.list_features(pid, "polygon")]}
 
 
+@router.post("/projects/{pid}/session", status_code=201,
+             summary="Import a session JSON document (points with rays, lines, polygons)")
+def import_session(pid: PID, request: Request,
+                   body: Annotated[dict[str, Any], Body(description=(
+                       "session JSON (DESIGN.md); points are solved with the project's "
+                       "settings; all or nothing"))]) -> dict[str, Any]:
+    return {"imported": svc(request).import_session(pid, body)}
+
+
 # points ----------------------------------------------------------------------------------
 @router.get("/projects/{pid}/points", summary="List points with their solved results")
-def list_points(pid: PID, request: Request) -> dict[str, Any]:
-    return fast_json({"points": [point_json(q) for q in svc(request).list_points(pid)]})
+def list_points(pid: PID, request: Request,
+                summary: Annotated[bool, Query(description=(
+                    "leave out rays and the full result (record only)"))] = False,
+                ) -> dict[str, Any]:
+    pts = [point_json(q) for q in svc(request).list_points(pid)]
+    if summary:
+        for q in pts:
+            del q["rays"], q["result"]
+    return fast_json({"points": pts})
 
 
 @router.post("/projects/{pid}/points", status_code=201, summary="Solve and store a point")

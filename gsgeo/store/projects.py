@@ -333,6 +333,50 @@ class Projects:
                                     "delete or change those first")
             tx.delete_point(pid, point_id)
 
+    def import_session(self, pid: str, doc: Any) -> dict[str, int]:
+        """Add the points, lines and polygons of a session JSON document, all or nothing.
+
+        Points are solved with the project's settings (the session's own crs/sigma_px are
+        ignored); an id that exists already, or a point that cannot be solved, refuses the
+        whole import with a message naming it.
+        """
+        from gsgeo.session import parse_session
+
+        session = parse_session(doc)
+        if not session.points and not session.lines and not session.polygons:
+            raise InputError("points: the session has no points, lines or polygons")
+        with self.store.transaction() as tx:
+            p = self._project(tx, pid)
+            for i, sp in enumerate(session.points):
+                where = f"points[{i}]"
+                point_id = item_id(sp.id, f"{where}.id")
+                if len(sp.rays) < 2:
+                    raise InputError(f"{where}.rays: a point needs at least two rays")
+                if tx.get_point(pid, point_id) is not None:
+                    raise ConflictError(f"{where}.id: point '{point_id}' already exists in "
+                                        f"project '{pid}'")
+                pt = PointRecord(project_id=pid, id=point_id, rays=[r.to_dict() for r in sp.rays],
+                                 code=sp.code, description=sp.description)
+                try:
+                    self._solve_into(pt, p, strict=True)
+                except GsgeoError as exc:
+                    raise type(exc)(f"{where} ('{point_id}'): {exc}") from None
+                tx.insert_point(pt)
+            for kind, feats in (("line", session.lines), ("polygon", session.polygons)):
+                for i, f in enumerate(feats):
+                    where = f"{kind}s[{i}]"
+                    fid = item_id(f.id, f"{where}.id")
+                    try:
+                        ids = self._feature_points(tx, pid, kind, f.points)
+                    except InputError as exc:
+                        raise InputError(f"{where}.{exc}") from None
+                    if tx.get_feature(pid, kind, fid) is not None:
+                        raise ConflictError(f"{where}.id: {kind} '{fid}' already exists")
+                    tx.insert_feature(FeatureRecord(project_id=pid, kind=kind, id=fid,
+                                                    point_ids=ids))
+        return {"points": len(session.points), "lines": len(session.lines),
+                "polygons": len(session.polygons)}
+
     # lines and polygons ---------------------------------------------------------------
     def _feature_points(self, tx: Transaction, pid: str, kind: str, ids: Any) -> list[str]:
         if not isinstance(ids, list):
