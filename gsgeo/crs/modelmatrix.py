@@ -73,23 +73,31 @@ def is_similarity(m: np.ndarray, tol: float = 1e-6) -> bool:
 def rendered_to_georeferenced(origins, directions, model_matrices) -> tuple[np.ndarray, np.ndarray, bool]:
     """Rays in rendered ECEF -> georeferenced ECEF, each ray with its own modelMatrix.
 
-    origins, directions : (N, 3); model_matrices : sequence of N (4, 4) matrices or None
-    (identity). Returns origins, unit directions and whether every matrix is a similarity.
+    origins, directions : (N, 3); model_matrices : sequence of N matrices ((4, 4), 16 numbers
+    column-major, or None for identity). Returns origins, unit directions and whether every
+    matrix is a similarity. Rays sharing a matrix (the usual case) share one inversion.
     """
     o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-    go = np.empty_like(o)
-    gd = np.empty_like(d)
-    similar = True
-    # One matrix per ray (a handful per point): the loop is over rays of one point only.
+    go = o.copy()
+    gd = d / np.linalg.norm(d, axis=1, keepdims=True)
+    groups: dict[bytes, list[int]] = {}
+    mats: dict[bytes, np.ndarray] = {}
     for i, mm in enumerate(model_matrices):
         if mm is None:
-            go[i] = o[i]
-            gd[i] = d[i] / np.linalg.norm(d[i])
             continue
-        m = mm if np.shape(mm) == (4, 4) else matrix4(mm)
+        m = np.asarray(mm, dtype=np.float64)
+        m = m if m.shape == (4, 4) else matrix4(m)
+        key = m.tobytes()
+        groups.setdefault(key, []).append(i)
+        mats[key] = m
+    similar = True
+    for key, idx in groups.items():
+        m = mats[key]
+        if np.array_equal(m, IDENTITY):
+            continue
         inv = invert_affine(m)
-        go[i] = apply_points(inv, o[i])
-        gd[i] = apply_directions(inv, d[i])
+        go[idx] = apply_points(inv, o[idx])
+        gd[idx] = apply_directions(inv, d[idx])
         similar &= is_similarity(m)
     return go, gd, similar

@@ -146,6 +146,26 @@ class MeasurementFailure:
         return {"point_id": self.point_id, "error": self.error}
 
 
+def _provisional(o: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Unweighted least-squares point of rays (ECEF), only to place the ENU origin.
+
+    Centred on the mean origin for precision; for degenerate (parallel) rays the mean origin
+    is returned and the intersection proper reports the geometry.
+    """
+    c = o.mean(axis=0)
+    u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    proj = np.eye(3)[None] - u[:, :, None] * u[:, None, :]
+    n = proj.sum(axis=0)
+    b = np.einsum("kij,kj->i", proj, o - c)
+    try:
+        x = np.linalg.solve(n, b)
+    except np.linalg.LinAlgError:
+        return c
+    if not np.all(np.isfinite(x)) or np.linalg.cond(n) > 1e12:
+        return c
+    return c + x
+
+
 def _exclusion_mask(exclude: Sequence[int], n: int, pid: str) -> np.ndarray:
     mask = np.zeros(n, dtype=bool)
     for k in exclude:
@@ -192,9 +212,7 @@ def measure_point(
             "distorted, so the angular model (ifov) is only approximate"
         )
     f_keep = None if ifov is None else ifov[keep]
-    # Provisional point in ECEF (the solver is rotation invariant and centres its input).
-    provisional = intersect(o[keep], d[keep]).point
-    frame = EnuFrame(provisional, src.id)
+    frame = EnuFrame(_provisional(o[keep], d[keep]), src.id)
     o_enu = frame.to_enu(o)
     d_enu = frame.directions_to_enu(d)
     sol = intersect(o_enu[keep], d_enu[keep], ifov=f_keep, sigma_px=sigma_px)
