@@ -34,6 +34,10 @@ from gsgeo.errors import InputError
 #: Bump when the geometry, the splats or the georeference change: older builds are rebuilt.
 VERSION = 1
 SCENE_NAME = "demo"
+#: The whole demo in one tile: CesiumJS 1.145 showed only the root tile of the 5-tile ADD tree
+#: gsgeo tiles makes by default (checked in headless Chromium), and one tile of ~350 000 splats
+#: renders at once.
+MAX_SPLATS_PER_TILE = 400_000
 
 
 @dataclass
@@ -89,7 +93,8 @@ def _run_tiles(ply: Path, out: Path, progress: TextIO | None) -> dict:
 
     offset = ",".join(f"{v:g}" for v in place.OFFSET)
     argv = ["tiles", str(ply), "-o", str(out), "--crs", place.CRS, "--offset", offset,
-            "--height", "ellipsoidal", "--overwrite", "--json", "--level", "1"]
+            "--height", "ellipsoidal", "--overwrite", "--json", "--level", "1",
+            "--max-splats", str(MAX_SPLATS_PER_TILE)]
     if progress is None:
         argv.append("--quiet")
     args = build_parser().parse_args(argv)
