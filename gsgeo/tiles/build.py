@@ -28,7 +28,6 @@ from gsgeo.tiles import gltf, lod, ply, spz
 from gsgeo.tiles.georef import Georeference, ecef_to_geodetic
 from gsgeo.tiles.splats import Splats
 
-
 #: The scene centre (origin of the root ENU frame) is the centre of the bounding box of this
 #: many splat centres spread through the file; the true extent is checked after reading.
 CENTRE_SAMPLE = 65_536
@@ -115,7 +114,7 @@ def _spz_file(path: Path) -> Splats:
     return spz.decode(data)[0]
 
 
-def _source(path: Path, block: int):
+def _source(path: Path, block: int, ring: int):
     """(count, sh_degree, size_bytes, bounds(), blocks()) of a PLY or SPZ input."""
     suffix = path.suffix.lower()
     if suffix == ".spz":
@@ -136,7 +135,7 @@ def _source(path: Path, block: int):
     layout = ply.read_layout(path)
     return (layout.count, layout.sh_degree, layout.size_bytes,
             lambda: ply.ply_bounds(layout, sample=CENTRE_SAMPLE),
-            lambda: ply.iter_ply(layout, block))
+            lambda: ply.iter_ply(layout, block, ring))
 
 
 def _prepare_outdir(outdir: Path, overwrite: bool) -> Path:
@@ -207,7 +206,7 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
                   georef: Georeference | None = None, *, max_splats: int = 131_072,
                   parent_splats: int | None = None, spz_version: int = 3, level: int = 1,
                   workers: int | None = None, overwrite: bool = False,
-                  progress: TextIO | None = sys.stderr, block: int = 262_144) -> Summary:
+                  progress: TextIO | None = sys.stderr, block: int = 65_536) -> Summary:
     """Convert a 3DGS PLY or SPZ file into a tileset directory ``outdir``.
 
     ``level`` is the gzip level of the SPZ payloads (1 fastest, 9 smallest); ``workers``
@@ -224,7 +223,9 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
         raise InputError("gzip level must be 0..9")
     if max_splats < 1000:
         raise InputError("--max-splats must be at least 1000")
-    count, sh_degree, _, bounds, blocks = _source(src, block)
+    nthreads = workers or os.cpu_count() or 2
+    # at most nthreads blocks are in flight while the next is read (see below)
+    count, sh_degree, _, bounds, blocks = _source(src, block, ring=nthreads + 2)
     if count == 0:
         raise InputError(f"{src}: the file holds no splats")
     lo, hi, n_finite = bounds()
@@ -252,7 +253,6 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
                 s = s.take(ok)
             return spz.quantize(placement.apply(s), spz_version) if s.count else None
 
-        nthreads = workers or os.cpu_count() or 2
         with ThreadPoolExecutor(max_workers=nthreads) as pool:
             pending: deque = deque()
             # numpy releases the GIL in its loops: blocks are turned and quantised in
@@ -274,7 +274,7 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
             georef.warnings.append(
                 f"the scene reaches {extent:.0f} m from its centre: SPZ positions use {frac} "
                 f"fractional bits ({1000 / 2 ** frac:.2f} mm steps) instead of 12")
-        root = lod.build_tree(held.positions, lod.splat_radius(held.scales),
+        root = lod.build_tree(held.positions.astype(np.float32), lod.splat_radius(held.scales),
                               lod.importance(held.alphas, held.scales),
                               max_splats=max_splats, parent_splats=parent_splats)
         nodes = [nd for nd in root.walk() if nd.index.shape[0]]
@@ -294,7 +294,8 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
             for done in pool.map(write, sorted(nodes, key=lambda nd: -nd.index.shape[0])):
                 bar.update(done)
         bar.close()
-        lon, lat, h = ecef_to_geodetic(_corners(root.lo, root.hi) @ placement.r_root
+        lon, lat, h = ecef_to_geodetic(_corners(root.lo.astype(float), root.hi.astype(float))
+                                       @ placement.r_root
                                        + placement.centre_ecef)
         summary = Summary(
             input=str(src), output=str(out), splats_in=count, splats_written=n,

@@ -244,11 +244,14 @@ class Placement:
     def _turn(self, s: Splats, rot: np.ndarray, log_scale: np.ndarray | float,
               positions: np.ndarray, sh_rot: np.ndarray) -> Splats:
         """Shared tail: turn orientations by rot ((3,3) or (N,3,3)), shift log sizes, turn SH."""
-        q = matrix_to_quat(rot).astype(np.float32)
+        q = matrix_to_quat(rot)
         if q.ndim == 1:
-            q = np.broadcast_to(q, s.rotations.shape)
-        rot_q = quat_multiply(q, s.rotations / np.linalg.norm(s.rotations, axis=1, keepdims=True))
-        scales = s.scales + np.asarray(log_scale, np.float32).reshape(-1, 1)
+            # one turn for all: q * r is linear in r, a single (N, 4) x (4, 4) product
+            rot_q = s.rotations @ quat_multiply(q, np.eye(4)).astype(np.float32)
+        else:
+            rot_q = quat_multiply(q.astype(np.float32), s.rotations)
+        ls = np.asarray(log_scale, np.float32)
+        scales = s.scales + ls.reshape(-1, 1) if ls.ndim or ls != 0 else s.scales
         sh = s.sh
         k = sh.shape[1]
         if k and rotation_angle(sh_rot) > SH_ROTATION_MIN_ANGLE:

@@ -51,9 +51,10 @@ def importance(alphas_u8: np.ndarray, scales_u8: np.ndarray) -> np.ndarray:
     return alphas_u8.astype(np.float32) * np.exp(log_vol * (2.0 / 3.0))
 
 
-def _split(pos: np.ndarray, idx: np.ndarray) -> list[np.ndarray]:
-    p = pos[idx]
-    spread = p.max(axis=0) - p.min(axis=0)
+def _split(pos_t: np.ndarray, idx: np.ndarray) -> list[np.ndarray]:
+    """Split indices at medians; pos_t is (3, N) (column-major work keeps reductions fast)."""
+    p = pos_t[:, idx]
+    spread = p.max(axis=1) - p.min(axis=1)
     axes = [a for a in np.argsort(-spread) if spread[a] >= 0.5 * spread.max()] or [0]
     parts = [np.arange(idx.shape[0])]
     for a in axes:
@@ -63,7 +64,7 @@ def _split(pos: np.ndarray, idx: np.ndarray) -> list[np.ndarray]:
                 nxt.append(part)
                 continue
             half = part.shape[0] // 2
-            order = np.argpartition(p[part, a], half)
+            order = np.argpartition(p[a, part], half)
             nxt += [part[order[:half]], part[order[half:]]]
         parts = nxt
     # sorted indices keep later gathers (pos[idx], attributes per tile) close to sequential
@@ -80,16 +81,21 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
     parent_splats = min(parent_splats, max_splats)
     n = pos.shape[0]
     idx_dtype = np.int32 if n < 2**31 else np.int64
+    pos_t = np.ascontiguousarray(np.asarray(pos).T)
 
     def box(idx):
         # centres' box grown by the largest splat radius: a little loose, but cheap, and
         # a parent's box still contains its children's
-        p = pos[idx]
+        p = pos_t[:, idx]
         r = radius[idx].max()
-        return p.min(axis=0) - r, p.max(axis=0) + r
+        return p.min(axis=1) - r, p.max(axis=1) + r
 
     root_idx = np.arange(n, dtype=idx_dtype)
-    lo, hi = box(root_idx) if n else (np.zeros(3), np.zeros(3))
+    if n:
+        r = radius.max()
+        lo, hi = pos_t.min(axis=1) - r, pos_t.max(axis=1) + r
+    else:
+        lo, hi = np.zeros(3), np.zeros(3)
     root = Node(root_idx, lo, hi, 0, "0")
     stack = [root]
     while stack:
@@ -100,7 +106,7 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
         order = np.argpartition(-prominence[idx], parent_splats - 1)
         keep, rest = idx[order[:parent_splats]], idx[order[parent_splats:]]
         node.index = np.sort(keep)
-        for i, part in enumerate(_split(pos, rest)):
+        for i, part in enumerate(_split(pos_t, rest)):
             clo, chi = box(part)
             child = Node(part, clo, chi, node.level + 1, f"{node.name}_{i}")
             node.children.append(child)

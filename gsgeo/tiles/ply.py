@@ -171,8 +171,14 @@ def _records_to_splats(rec: np.ndarray, layout: PlyLayout) -> Splats:
     return Splats(positions, scales, rotations, opacities, colors, sh)
 
 
-def iter_records(layout: PlyLayout, block: int = 262_144) -> Iterator[np.ndarray]:
-    """Vertex records in blocks (structured arrays); memory is bounded by the block size."""
+def iter_records(layout: PlyLayout, block: int = 262_144,
+                 ring: int = 0) -> Iterator[np.ndarray]:
+    """Vertex records in blocks (structured arrays); memory is bounded by the block size.
+
+    With ``ring`` > 0 the blocks are read into that many recycled buffers (no page faults
+    for fresh memory each block): block i is overwritten by block i + ring, so a consumer
+    must be done with a block before ``ring`` more are read.
+    """
     if layout.fmt == "ascii":
         from plyfile import PlyData  # ASCII is rare for 3DGS; read it whole
         data = PlyData.read(str(layout.path))["vertex"].data
@@ -183,10 +189,13 @@ def iter_records(layout: PlyLayout, block: int = 262_144) -> Iterator[np.ndarray
     with open(layout.path, "rb") as f:
         f.seek(layout.data_offset)
         left = layout.count
+        bufs = [np.empty(min(block, layout.count), layout.dtype) for _ in range(ring)]
+        i = 0
         while left > 0:
             m = min(block, left)
-            # a fresh buffer per block: blocks are consumed concurrently and keep views of it
-            rec = np.empty(m, layout.dtype)
+            # blocks are consumed concurrently and keep views of their buffer
+            rec = bufs[i % ring][:m] if ring else np.empty(m, layout.dtype)
+            i += 1
             got = f.readinto(memoryview(rec.view(np.uint8)))
             if got != m * size:
                 raise InputError(f"{layout.path}: file ended inside the vertex data")
@@ -194,9 +203,9 @@ def iter_records(layout: PlyLayout, block: int = 262_144) -> Iterator[np.ndarray
             left -= m
 
 
-def iter_ply(layout: PlyLayout, block: int = 262_144) -> Iterator[Splats]:
-    """Splats of a PLY in blocks, as stored (frame of the file)."""
-    for rec in iter_records(layout, block):
+def iter_ply(layout: PlyLayout, block: int = 262_144, ring: int = 0) -> Iterator[Splats]:
+    """Splats of a PLY in blocks, as stored (frame of the file); see iter_records for ring."""
+    for rec in iter_records(layout, block, ring):
         yield _records_to_splats(rec, layout)
 
 

@@ -42,6 +42,11 @@ scene.sun.show = false;
 scene.moon.show = false;
 scene.backgroundColor = Cesium.Color.BLACK;
 window.state = {loaded: false, error: null};
+// loaded, and Cesium's splat primitive has built its textures and sorted the splats
+window.splatsStable = () => {
+  const t = window.state.tileset, p = t && t.gaussianSplatPrimitive;
+  return window.state.loaded && !!p && p.isStable;
+};
 (async () => {
   try {
     const tileset = await Cesium.Cesium3DTileset.fromUrl("TILESET", {maximumScreenSpaceError: 16});
@@ -108,8 +113,8 @@ def render(site: Path, tileset_url: str, png: Path, *, size=(800, 600),
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.goto(f"{base}/index.html")
-            page.wait_for_function("window.state && (window.state.loaded || window.state.error)",
-                                   timeout=timeout_s * 1000)
+            page.wait_for_function("window.state && (window.state.error || window.splatsStable())",
+                                   timeout=timeout_s * 1000, polling=500)
             err = page.evaluate("window.state.error")
             if err:
                 raise RuntimeError(f"Cesium could not load the tileset: {err}")
