@@ -1,0 +1,115 @@
+"""`gsgeo demo`: builds the scene, creates the demo project with the truth as check points.
+
+Runs the real command line in a subprocess against a real SQLite store in a temporary data
+directory; a point measured exactly on a marker must show no difference to the truth.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gsgeo.demo import place, scene
+from gsgeo.store import Projects, open_store
+
+
+def _gsgeo(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "gsgeo", *args], capture_output=True,
+                          text=True, timeout=600, cwd=cwd)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    d = tmp_path_factory.mktemp("demo") / "gsgeo-data"
+    r = _gsgeo("demo", "--data", str(d), "--no-serve")
+    assert r.returncode == 0, r.stderr
+    assert "20 check points" in r.stdout and "?scene=demo&project=demo" in r.stdout
+    return d
+
+
+def test_demo_builds_scene_and_project(data):
+    assert (data / "scenes" / "demo" / "tileset.json").is_file()
+    assert (data / "demo" / "scene.ply").is_file()
+    con = sqlite3.connect(data / "gsgeo.sqlite")
+    try:
+        tables = {r[0] for r in con.execute("select name from sqlite_master where type='table'")}
+        cp_table = next(t for t in tables if "check" in t)
+        ids = sorted(r[0] for r in con.execute(f"select id from {cp_table}"))
+    finally:
+        con.close()
+    assert ids == sorted(v.id for v in scene.VALIDATION_POINTS)
+    store = open_store(data)
+    try:
+        p = Projects(store, data).get_project("demo")
+        assert p.crs == place.CRS and p.scene == "demo"
+    finally:
+        store.close()
+
+
+def _rays_at(target: np.ndarray, n: int = 4) -> list[dict]:
+    """Exact rays from n cameras 30 m away and 25 m up (in the local up of the target)."""
+    up = target / np.linalg.norm(target)
+    east = np.cross([0.0, 0.0, 1.0], up)
+    east /= np.linalg.norm(east)
+    north = np.cross(up, east)
+    rays = []
+    for k in range(n):
+        a = 2 * np.pi * k / n
+        o = target + 30 * (np.cos(a) * east + np.sin(a) * north) + 25 * up
+        d = (target - o) / np.linalg.norm(target - o)
+        rays.append({"origin": o.tolist(), "direction": d.tolist()})
+    return rays
+
+
+def test_a_point_measured_on_a_marker_matches_its_truth(data):
+    truth = {t.id: np.array(t.ecef) for t in place.truth_points()}
+    store = open_store(data)
+    try:
+        projects = Projects(store, data)
+        projects.add_point("demo", {"id": "T2", "rays": _rays_at(truth["T2"])})
+        # a point off the truth by 5 cm east-ish: the report must show it
+        off = truth["S1"] + 0.05 * np.cross([0.0, 0.0, 1.0], truth["S1"]) / np.linalg.norm(
+            np.cross([0.0, 0.0, 1.0], truth["S1"]))
+        projects.add_point("demo", {"id": "S1", "rays": _rays_at(off)})
+        rep = projects.accuracy("demo")
+    finally:
+        store.close()
+    by_id = {r["id"]: r for r in rep["points"]}
+    assert rep["counts"]["matched"] == 2
+    assert abs(by_id["T2"]["d3D"]) < 1e-3
+    assert by_id["S1"]["d3D"] == pytest.approx(0.05, abs=1e-3)
+    assert by_id["S1"]["dE"] == pytest.approx(0.05, abs=2e-3)
+
+
+def test_rerun_reuses_the_scene_and_keeps_measurements(data):
+    store = open_store(data)
+    try:
+        g1 = next(np.array(t.ecef) for t in place.truth_points() if t.id == "G1")
+        Projects(store, data).add_point("demo", {"id": "G1", "rays": _rays_at(g1)})
+    finally:
+        store.close()
+    r = _gsgeo("demo", "--data", str(data), "--no-serve")
+    assert r.returncode == 0, r.stderr
+    assert "using the scene built" in r.stderr
+    store = open_store(data)
+    try:
+        projects = Projects(store, data)
+        ids = {p.id for p in projects.list_points("demo")}
+        n_cp = len(projects.list_check_points("demo"))
+    finally:
+        store.close()
+    assert "G1" in ids   # points measured before the rerun survive
+    assert n_cp == 20
+
+
+def test_bad_arguments_get_a_message(tmp_path):
+    f = tmp_path / "a-file"
+    f.write_text("x")
+    r = _gsgeo("demo", "--data", str(f), "--no-serve")
+    assert r.returncode == 2 and "is not a directory" in r.stderr and "Traceback" not in r.stderr
+    r = _gsgeo("demo", "--data", str(tmp_path / "d"), "--port", "70000")
+    assert r.returncode == 2 and "--port" in r.stderr and "Traceback" not in r.stderr
