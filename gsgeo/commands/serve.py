@@ -57,23 +57,25 @@ def run(args: argparse.Namespace) -> int:
     if data.exists() and not data.is_dir():
         raise InputError(f"--data {data}: is not a directory")
     token, generated = resolve_token(args.host)
+    log_level = getattr(args, "log_level", "warning")
     if generated:
         print(f"gsgeo serve: bound to {args.host}: API token {token}\n"
               f"  send it as 'Authorization: Bearer {token}' or open "
               f"http://{args.host}:{args.port}/#token={token}", file=sys.stderr, flush=True)
-    if not 1 <= args.workers <= 64:
-        raise InputError(f"--workers must be between 1 and 64, got {args.workers}")
+    workers = getattr(args, "workers", 1)  # callers such as `gsgeo demo` may leave it out
+    if not 1 <= workers <= 64:
+        raise InputError(f"--workers must be between 1 and 64, got {workers}")
     config = ServerConfig(data_dir=data, host=args.host, port=args.port, token=token,
                           web_dir=Path(args.web) if args.web else None)
     app = create_app(config)  # opens (and migrates) the store before accepting requests
-    common = {"host": args.host, "port": args.port, "log_level": args.log_level,
+    common = {"host": args.host, "port": args.port, "log_level": log_level,
               "server_header": False, "limit_concurrency": 1000, "timeout_keep_alive": 30}
     print(f"gsgeo serve: data {data.resolve()}; http://{args.host}:{args.port}/ "
           "(API docs at /docs)", file=sys.stderr, flush=True)
-    if args.workers == 1:
+    if workers == 1:
         uvicorn.Server(uvicorn.Config(app, **common)).run()
     else:
         os.environ[CONFIG_ENV] = config_to_env(config)
-        uvicorn.run("gsgeo.server.app:app_from_env", factory=True, workers=args.workers,
+        uvicorn.run("gsgeo.server.app:app_from_env", factory=True, workers=workers,
                     **common)
     return 0
