@@ -873,12 +873,29 @@ viewer.scene.postRender.addEventListener(() => {
 // ---------------------------------------------------------------------------------------
 // input
 
+/** The stored point whose marker is nearest to a window position (CSS px), within `tol` px. */
+function nearestPoint(windowPosition, tol) {
+  const mmNow = modelMatrix();
+  let best = null;
+  let bestD = tol;
+  for (const p of state.points) {
+    if (!p.result || !p.result.point_ecef) continue;
+    const pos = applyPoint(mmNow, p.result.point_ecef);
+    const cam = viewer.camera.positionWC;
+    const dir = viewer.camera.directionWC;
+    if ((pos[0] - cam.x) * dir.x + (pos[1] - cam.y) * dir.y + (pos[2] - cam.z) * dir.z <= 0) continue;
+    const win = Cesium.SceneTransforms.worldToWindowCoordinates(viewer.scene, cart(pos));
+    if (!win) continue;
+    const d = Math.hypot(win.x - windowPosition.x, win.y - windowPosition.y);
+    if (d <= bestD) { bestD = d; best = p.id; }
+  }
+  return best;
+}
+
 const clicks = new Cesium.ScreenSpaceEventHandler(viewer.scene.canvas);
 clicks.setInputAction((ev) => {
   if (state.mode === "measure") { addRay(ev.position); return; }
-  const hit = viewer.scene.drillPick(ev.position, 8).find((o) => o && o.id && typeof o.id.id === "string"
-    && o.id.id.startsWith("pt:"));
-  const id = hit ? hit.id.id.slice(3) : null;
+  const id = nearestPoint(ev.position, 14);
   if (state.mode === "line" || state.mode === "polygon") {
     if (id) pickFeaturePoint(id);
     else message("Click on a point marker (or a row of the points list).");
