@@ -77,24 +77,25 @@ def _sh_buckets(k: int) -> np.ndarray:
 
 
 def _quantize_sh(sh: np.ndarray) -> np.ndarray:
-    """SH floats (N, K, 3) to bytes (N, K*3): round(x·128 + 128) to the nearest multiple of
-    the coefficient's bucket (the reference encoder's precision), clamped to 0..255."""
+    """SH floats (N, K, 3) to bytes (N, K*3): x·128 + 128 to the nearest multiple of the
+    coefficient's bucket (the reference encoder's precision), at most 256 - bucket. (The
+    reference encoder rounds twice and clamps to 255; both decode within half a bucket.)"""
     n, k, _ = sh.shape
     if k == 0:
         return np.zeros((n, 0), np.uint8)
     bucket = _sh_buckets(k)
     # work in memory order: PLY blocks arrive as a transposed view of (N, 3, K)
     channel_major = sh.transpose(0, 2, 1)
-    if channel_major.flags.c_contiguous:
+    if channel_major.strides[2] == channel_major.itemsize:
         work, b = channel_major, bucket
     else:
         work, b = sh, bucket[:, None]
     v = work * (np.float32(128.0) / b)
     v += np.float32(128.0) / b + np.float32(0.5)
-    np.floor(v, out=v)
-    v *= b
-    np.clip(v, 0, 255, out=v)
+    # bucket index: floor, clamped so index * bucket <= 255 (truncation is floor once >= 0)
+    np.clip(v, 0, np.float32(256.0) / b - np.float32(0.5), out=v)
     out = v.astype(np.uint8)
+    out *= b.astype(np.uint8)
     if work is channel_major:
         out = out.transpose(0, 2, 1)
     return np.ascontiguousarray(out).reshape(n, k * 3)
