@@ -20,6 +20,7 @@ length or area.) tests/test_export_features.py checks the sigmas against Monte-C
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -85,16 +86,33 @@ def _variance(grad: np.ndarray, cov: np.ndarray) -> float:
     return float(max(np.einsum("ni,nij,nj->", grad, c, grad), 0.0))
 
 
+@functools.lru_cache(maxsize=64)
+def _next(n: int) -> np.ndarray:
+    return np.r_[1:n, 0]
+
+
+@functools.lru_cache(maxsize=64)
+def _prev(n: int) -> np.ndarray:
+    return np.r_[n - 1, 0:n - 1]
+
+
+@functools.lru_cache(maxsize=64)
+def _edge_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i < j) of non-adjacent edges of a closed ring of n edges."""
+    i, j = np.triu_indices(n, k=2)
+    keep = ~((i == 0) & (j == n - 1))  # first and last edges share point 0
+    return i[keep], j[keep]
+
+
 def _path_length(p: np.ndarray, dims: int, closed: bool) -> tuple[float, np.ndarray]:
     """Length of the path through p[:, :dims] and its gradient (N, 3) w.r.t. every point."""
     q = p[:, :dims]
-    nxt = np.roll(q, -1, axis=0) if closed else q[1:]
-    d = nxt - (q if closed else q[:-1])
+    d = (q[_next(q.shape[0])] - q) if closed else (q[1:] - q[:-1])
     seg = np.sqrt(np.einsum("ki,ki->k", d, d))
     u = np.divide(d, seg[:, None], out=np.zeros_like(d), where=seg[:, None] > 0)
     g = np.zeros((p.shape[0], 3))
     if closed:
-        g[:, :dims] = np.roll(u, 1, axis=0) - u  # edge k runs from point k to point k+1
+        g[:, :dims] = u[_prev(u.shape[0])] - u  # edge k runs from point k to point k+1
     else:
         g[1:, :dims] += u
         g[:-1, :dims] -= u
@@ -150,10 +168,8 @@ def ring_self_intersection(xy: np.ndarray) -> tuple[int, int] | None:
     q = np.asarray(xy, dtype=np.float64)
     q = q - q.mean(axis=0)
     n = q.shape[0]
-    a, b = q, np.roll(q, -1, axis=0)
-    i, j = np.triu_indices(n, k=2)
-    keep = ~((i == 0) & (j == n - 1))  # first and last edges share point 0
-    i, j = i[keep], j[keep]
+    a, b = q, q[_next(n)]
+    i, j = _edge_pairs(n)
     if i.size:
         p1, p2, p3, p4 = a[i], b[i], a[j], b[j]
         o1, o2 = _orient(p1, p2, p3), _orient(p1, p2, p4)
@@ -168,7 +184,7 @@ def ring_self_intersection(xy: np.ndarray) -> tuple[int, int] | None:
             return int(i[k]), int(j[k])
     # Adjacent edges k and k+1 fold back: collinear with opposite directions.
     d0 = b - a
-    d1 = np.roll(d0, -1, axis=0)
+    d1 = d0[_next(n)]
     cross = d0[:, 0] * d1[:, 1] - d0[:, 1] * d1[:, 0]
     fold = (cross == 0) & (np.einsum("ki,ki->k", d0, d1) < 0)
     if fold.any():
@@ -214,7 +230,7 @@ def polygon_measures(xyz, cov=None, ids: Sequence[str] | None = None, *, unit_m:
 
         raise GeometryError(f"the polygon is self-intersecting: edge {edge(k)} meets edge {edge(m)}")
     q = xy - xy.mean(axis=0)
-    nxt, prv = np.roll(q, -1, axis=0), np.roll(q, 1, axis=0)
+    nxt, prv = q[_next(n)], q[_prev(n)]
     signed = 0.5 * float(np.sum(q[:, 0] * nxt[:, 1] - nxt[:, 0] * q[:, 1]))
     if signed == 0.0:
         raise GeometryError("the polygon's points are collinear: its area is zero")

@@ -103,24 +103,22 @@ def _measurement_columns(ms: list) -> dict[str, Any] | None:
     the per-point numpy reductions done once over all points. None when an object is not a
     Measurement with a grid point and covariance (the caller then uses record()).
     """
-    if not all(hasattr(m, "grid") and hasattr(m, "solution") for m in ms):
+    if not all(type(m).__name__ == "Measurement" for m in ms):
         return None
     grids = [m.grid for m in ms]
     if any(g is None or g.covariance is None for g in grids):
         return None
     sols = [m.solution for m in ms]
     cov = np.array([g.covariance for g in grids], dtype=np.float64)
-    kept = [np.asarray(m.excluded, dtype=bool) for m in ms]
-    n_all = np.array([k.shape[0] for k in kept])
-    n_excl = np.add.reduceat(np.concatenate(kept).astype(np.int64), np.cumsum(n_all) - n_all)
-    max_px: list = [None] * len(ms)
-    have = [i for i, s in enumerate(sols) if s.residuals_px is not None]
-    if have:
-        px = [np.asarray(sols[i].residuals_px, dtype=np.float64).ravel() for i in have]
-        lens = np.array([a.shape[0] for a in px])
-        mx = np.maximum.reduceat(np.concatenate(px), np.cumsum(lens) - lens).tolist()
-        for i, v in zip(have, mx, strict=True):
-            max_px[i] = v
+    exc = [m.excluded for m in ms]
+    n_all = np.fromiter(map(len, exc), dtype=np.int64, count=len(exc))
+    n_excl = np.add.reduceat(np.concatenate(exc).astype(np.int64), np.cumsum(n_all) - n_all)
+    px = [s.residuals_px for s in sols]
+    if all(v is not None for v in px):
+        lens = np.fromiter(map(len, px), dtype=np.int64, count=len(px))
+        max_px = np.maximum.reduceat(np.concatenate(px), np.cumsum(lens) - lens).tolist()
+    else:  # a mix of angular and unweighted points
+        max_px = [None if v is None else float(np.max(v)) for v in px]
     out: dict[str, Any] = {
         "point_id": [m.point_id for m in ms], "code": [m.code for m in ms],
         "description": [m.description for m in ms],
@@ -233,8 +231,10 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
     measurements in different CRSs).
     """
     items = list(measurements)
-    failed = {str(_get(m, "point_id")): str(_get(m, "error")) for m in items if _is_failure(m)}
-    solved = [m for m in items if not _is_failure(m)]
+    fail = [_is_failure(m) for m in items]
+    failed = {str(_get(m, "point_id")): str(_get(m, "error"))
+              for m, f in zip(items, fail, strict=True) if f}
+    solved = [m for m, f in zip(items, fail, strict=True) if not f] if failed else items
     if not solved:
         why = f" ({len(failed)} point(s) could not be solved)" if failed else ""
         raise InputError(f"nothing to export: no measured points{why}")
@@ -304,21 +304,27 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
 
 def _measurement_rays(ms: list):
     """`_rays` for many Measurement objects at once: (owners, counts, origins, px, m, out, exc)."""
-    have = [i for i, m in enumerate(ms) if m.ray_origins_grid is not None]
-    if not have:
-        return None
-    sel = [ms[i] for i in have]
-    org = [m.ray_origins_grid for m in sel]
-    counts = np.array([o.shape[0] for o in org])
+    org = [m.ray_origins_grid for m in ms]
+    if all(o is not None for o in org):
+        have, sel = np.arange(len(ms)), ms
+    else:
+        have = np.array([i for i, o in enumerate(org) if o is not None], dtype=np.int64)
+        if not have.size:
+            return None
+        sel = [ms[i] for i in have]
+        org = [org[i] for i in have]
+    counts = np.fromiter(map(len, org), dtype=np.int64, count=len(org))
 
     def cat(name, fill):
         vals = [getattr(m, name) for m in sel]
+        if all(v is not None for v in vals):
+            return np.concatenate(vals)
         return np.concatenate([np.full(c, fill) if v is None else np.asarray(v)
                                for v, c in zip(vals, counts, strict=True)])
 
-    return (np.array(have), counts, np.concatenate(org), cat("residuals_px", math.nan),
+    return (have, counts, np.concatenate(org), cat("residuals_px", math.nan),
             cat("residuals_m", math.nan), cat("outliers", False).astype(bool),
-            np.concatenate([np.asarray(m.excluded, dtype=bool) for m in sel]))
+            np.concatenate([m.excluded for m in sel]).astype(bool))
 
 
 def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str]) -> None:
