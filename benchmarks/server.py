@@ -8,7 +8,8 @@
    - "operators": each client waits an exponential think time (mean `--think` s, default 2)
      between requests, like people aiming and clicking (the viewer asks for a live solution
      at every click);
-   - "saturation": no think time (closed loop), which measures the server's capacity.
+   - "saturation": no think time (closed loop), which measures the server's capacity;
+   - "one client": a single client, no think time: the latency floor without queueing.
    Reported: p50, p90, p99, max latency (ms) and requests/s.
 2. Tile throughput: the same scene files fetched for `--seconds` by 8 concurrent clients from
    gsgeo serve (/scenes/<name>/...) and from `python -m http.server` on the scene directory,
@@ -241,11 +242,13 @@ def main() -> int:
                          "workers": args.workers, "intersect": {}, "tiles": {}}
         print(f"gsgeo serve on {base} ({args.workers} worker(s)); {os.cpu_count()} CPUs",
               file=sys.stderr)
-        for name, think in (("operators", args.think), ("saturation", 0.0)):
-            print(f"intersect, {name}: {args.clients} clients x {args.requests} requests...",
+        runs = (("one client", 1, 200, 0.0), ("operators", args.clients, args.requests, args.think),
+                ("saturation", args.clients, args.requests, 0.0))
+        for name, clients, requests, think in runs:
+            print(f"intersect, {name}: {clients} clients x {requests} requests...",
                   file=sys.stderr)
             cpu0 = cpu_seconds(gs.pid)
-            r = latency_run(base, args.clients, args.requests, think, seed=1)
+            r = latency_run(base, clients, requests, think, seed=1)
             r["server_cpu_ms_per_request"] = (cpu_seconds(gs.pid) - cpu0) * 1000 / r["requests"]
             results["intersect"][name] = r
             print(f"  p50 {r['p50_ms']:.1f} ms  p90 {r['p90_ms']:.1f} ms  p99 {r['p99_ms']:.1f} ms"
