@@ -644,3 +644,30 @@ def test_session_import_is_all_or_nothing(client, project):
                "lines[0].points[1]")
     assert [p["id"] for p in client.get(f"/api/projects/{project}/points").json()["points"]] == \
         ["A", "B"]
+
+
+def test_project_with_a_geoid_grid_from_the_data_directory(tmp_path):
+    """A geoid named by a project is a file in DATA/geoids; heights become H = h - N."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    data = tmp_path / "data"
+    (data / "geoids").mkdir(parents=True)
+    with rasterio.open(data / "geoids" / "flat47.tif", "w", driver="GTiff", width=40, height=40,
+                       count=1, dtype="float32", crs="EPSG:4326",
+                       transform=from_origin(-2.0, 53.0, 0.1, 0.1)) as ds:
+        ds.write(np.full((1, 40, 40), 47.0, dtype="float32"))
+    (tmp_path / "outside.tif").write_bytes(b"x")
+    with make_client(data) as c:
+        expect_422(c.post("/api/projects", json={"name": "g", "crs": "EPSG:32630",
+                                                 "geoid": "nope.tif"}), "geoid")
+        expect_422(c.post("/api/projects", json={"name": "g", "crs": "EPSG:32630",
+                                                 "geoid": "../../outside.tif"}), "geoid")
+        pid = c.post("/api/projects", json={"name": "g", "crs": "EPSG:32630"}).json()["id"]
+        c.post(f"/api/projects/{pid}/points", json={"id": "A", "rays": london_rays(4)})
+        r = c.patch(f"/api/projects/{pid}", json={"geoid": "flat47.tif"})
+        assert r.status_code == 200, r.text
+        rec = c.get(f"/api/projects/{pid}/points/A").json()["record"]
+        assert rec["height_type"] == "orthometric"
+        assert rec["height"] == pytest.approx(LONDON[2] - 47.0, abs=1e-3)
+        assert rec["h_wgs84"] == pytest.approx(LONDON[2], abs=1e-3)
