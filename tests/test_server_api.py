@@ -671,3 +671,28 @@ def test_project_with_a_geoid_grid_from_the_data_directory(tmp_path):
         assert rec["height_type"] == "orthometric"
         assert rec["height"] == pytest.approx(LONDON[2] - 47.0, abs=1e-3)
         assert rec["h_wgs84"] == pytest.approx(LONDON[2], abs=1e-3)
+
+
+def test_geographic_check_points_take_the_measured_points_path(client):
+    """WGS 84 check points into OSGB36 go through the same datum operation as the points:
+    the exact target compares at zero, whatever operation PROJ would pick on its own."""
+    pid = client.post("/api/projects", json={"name": "gb", "crs": "EPSG:27700"}).json()["id"]
+    client.post(f"/api/projects/{pid}/points", json={"id": "A", "rays": london_rays(4)})
+    client.post(f"/api/projects/{pid}/points",
+                json={"id": "B", "rays": rays_at(ecef_of(*target(3)), 4)})
+    client.post(f"/api/projects/{pid}/checkpoints", json={"crs": "EPSG:4979", "points": [
+        {"id": "A", "x": LONDON[0], "y": LONDON[1], "z": LONDON[2]}]})
+    client.post(f"/api/projects/{pid}/checkpoints", json={"crs": "EPSG:4326", "points": [
+        {"id": "B", "x": target(3)[0], "y": target(3)[1]}]})
+    client.post(f"/api/projects/{pid}/points",
+                json={"id": "C", "rays": rays_at(ecef_of(*target(5)), 4)})
+    x = ecef_of(*target(5))
+    client.post(f"/api/projects/{pid}/checkpoints", json={"crs": "EPSG:4978", "points": [
+        {"id": "C", "x": x[0], "y": x[1], "z": x[2]}]})
+    acc = client.get(f"/api/projects/{pid}/accuracy").json()
+    pts = {p["id"]: p for p in acc["points"]}
+    assert abs(pts["A"]["dE"]) < 1e-4 and abs(pts["A"]["dN"]) < 1e-4
+    assert abs(pts["A"]["dH"]) < 1e-4
+    assert abs(pts["B"]["dE"]) < 1e-4 and pts["B"]["dH"] is None
+    assert abs(pts["C"]["dN"]) < 1e-4 and abs(pts["C"]["dH"]) < 1e-4
+    assert acc["counts"]["matched"] == 3 and acc["counts"]["matched_vertical"] == 2

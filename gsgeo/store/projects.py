@@ -512,7 +512,9 @@ class Projects:
         solved = {q.id: q.record for q in pts if q.record is not None
                   and q.record.get("easting") is not None}
         matched = [c for c in cps if c.id in solved]
-        grid = check_points_in_grid(matched, p.crs)
+        hint = np.array([np.nan if solved[c.id].get("h_wgs84") is None
+                         else solved[c.id]["h_wgs84"] for c in matched], dtype=float)
+        grid = check_points_in_grid(matched, p, data_dir=self.data_dir, height_hint=hint)
         meas = np.array([[solved[c.id]["easting"], solved[c.id]["northing"],
                           np.nan if solved[c.id].get("height") is None else solved[c.id]["height"]]
                          for c in matched], dtype=float).reshape(-1, 3)
@@ -527,34 +529,63 @@ class Projects:
         }
         rep["crs"] = p.crs
         rep["units"] = "metres; differences are measured minus check"
-        rep["heights"] = ("check point heights are compared as given: they must be in the "
+        rep["heights"] = ("check points in a geographic or geocentric CRS take the measured "
+                          "points' own path into the grid (heights included); heights of check "
+                          "points in a projected CRS are compared as given and must be in the "
                           f"project's height system ({', '.join(height_types) or 'none'})")
         return json_ready(rep)
 
 
-def check_points_in_grid(cps: list[CheckPointRecord], crs: str) -> np.ndarray:
-    """(M, 3) easting, northing, height of check points in the project's horizontal grid CRS.
+def check_points_in_grid(cps: list[CheckPointRecord], project: Project,
+                         crs: str | None = None, data_dir: Path | None = None,
+                         height_hint: np.ndarray | None = None) -> np.ndarray:
+    """(M, 3) easting, northing, height of check points in the project's grid (or ``crs``).
 
-    Horizontal coordinates go through PROJ from each check point's CRS; heights are taken
-    as given (NaN where missing).
+    Check points in a geographic or geocentric CRS go to ECEF and then through
+    gsgeo.crs.to_grid_many, the very path the measured points take (same datum operation,
+    same vertical datum or geoid), so a difference is never a difference of paths. Points in a
+    projected (or compound) CRS: easting/northing through PROJ when the CRS differs, heights
+    as given. A missing height stays NaN; ``height_hint`` (M,) ellipsoidal heights (e.g. of the
+    matched measured points) stand in for it in 3-D datum steps, where the height moves E, N
+    by about 1 mm per 50 m.
     """
+    from gsgeo.crs.grid import to_grid_many
     from gsgeo.crs.resolve import parse_crs, projected_crs
     from gsgeo.crs.transformers import transformer
 
+    grid = crs or project.crs
+    same_grid = grid == project.crs
+    vertical = project.vertical if same_grid else None
+    geoid = resolve_geoid(project.geoid, data_dir) if same_grid else None
     out = np.full((len(cps), 3), np.nan)
-    target = projected_crs(crs)
+    target = projected_crs(grid)
     for src in sorted({c.crs for c in cps}):
         idx = [i for i, c in enumerate(cps) if c.crs == src]
         xyz = np.array([[cps[i].x, cps[i].y, np.nan if cps[i].z is None else cps[i].z]
                         for i in idx], dtype=float)
         s = parse_crs(src)
-        horiz = s.sub_crs_list[0] if s.is_compound else s
-        if horiz.equals(target):
-            e, n = xyz[:, 0], xyz[:, 1]
+        if s.is_geocentric or s.is_geographic:
+            has_h = np.isfinite(xyz[:, 2])
+            src3 = s if s.is_geocentric or len(s.axis_info) == 3 else s.to_3d()
+            t = transformer(src3.to_wkt(), parse_crs(project.source_crs).to_wkt())
+            hint = np.zeros(len(idx)) if height_hint is None else \
+                np.nan_to_num(np.asarray(height_hint, dtype=float)[idx])
+            ecef = np.column_stack(t.transform(xyz[:, 0], xyz[:, 1],
+                                               np.where(has_h, xyz[:, 2], hint)))
+            if not np.all(np.isfinite(ecef)):
+                raise CRSError(f"check points in {src}: some cannot be transformed to "
+                               f"{project.source_crs}")
+            g = to_grid_many(ecef, None, grid, vertical=vertical, geoid=geoid,
+                             source_crs=project.source_crs)
+            e, n, h = g.easting, g.northing, np.where(has_h, g.height, np.nan)
         else:
-            t = transformer(horiz.to_wkt(), target.to_wkt())
-            e, n = t.transform(xyz[:, 0], xyz[:, 1])
-        out[idx, 0], out[idx, 1], out[idx, 2] = e, n, xyz[:, 2]
+            horiz = s.sub_crs_list[0] if s.is_compound else s
+            if horiz.equals(target):
+                e, n = xyz[:, 0], xyz[:, 1]
+            else:
+                e, n = transformer(horiz.to_wkt(), target.to_wkt()).transform(xyz[:, 0], xyz[:, 1])
+            h = xyz[:, 2]
+        out[idx, 0], out[idx, 1], out[idx, 2] = e, n, h
     if not np.all(np.isfinite(out[:, :2])):
         raise CRSError("check points: some cannot be transformed into the project's grid CRS")
     return out
