@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import time
 
 import numpy as np
 import pyproj
@@ -44,7 +45,7 @@ def server(tmp_path_factory):
         yield base
     finally:
         proc.terminate()
-        proc.wait(10)
+        proc.communicate(timeout=10)
 
 
 @pytest.fixture(scope="module")
@@ -85,9 +86,25 @@ class Page:
             "window.gsgeo.tileset && window.gsgeo.tilesReady && window.gsgeo.tileset.tilesLoaded",
             timeout=90_000)
 
-    def shot(self, name: str, settle_ms: int = 3500):
-        """Screenshot to artifacts/ after the splats had time to sort and draw."""
+    def splats_drawn(self) -> float:
+        """Fraction of the viewer's pixels that differ from the empty globe (splats drawn)."""
+        import io
+
+        from PIL import Image
+
+        box = self.page.locator("#cesium").bounding_box()
+        img = np.asarray(Image.open(io.BytesIO(self.page.screenshot(clip=box))).convert("RGB"),
+                         dtype=int)
+        globe = np.array([0x3a, 0x40, 0x46])
+        return float((np.abs(img - globe).sum(axis=2) > 40).mean())
+
+    def shot(self, name: str, settle_ms: int = 1000, timeout_s: float = 40.0):
+        """Screenshot to artifacts/ once the splats are sorted and drawn (SwiftShader on a busy
+        machine takes seconds after each camera move)."""
         self.page.wait_for_timeout(settle_ms)
+        deadline = time.monotonic() + timeout_s
+        while self.splats_drawn() < 0.25 and time.monotonic() < deadline:
+            self.page.wait_for_timeout(1000)
         ARTIFACTS.mkdir(exist_ok=True)
         self.page.screenshot(path=str(ARTIFACTS / f"workplace_{name}.png"))
 
@@ -175,8 +192,19 @@ def test_create_project_and_measure_known_point(server, browser):
         # residuals of exact clicks are tiny; every ray has one
         res_px = [float(t) for t in p.page.locator("#ray-table tbody tr td:nth-child(2)").all_inner_texts()]
         assert len(res_px) == 4 and max(res_px) < 0.05, res_px
+        # the ellipsoid is drawn at its true size: 2.7955 sqrt(eigenvalues of the covariance)
+        cov = np.array(p.page.evaluate("gsgeo.state.measure.solution.cov_ecef"))
+        expect = 2.7955 * np.sqrt(np.sort(np.linalg.eigvalsh(cov))[::-1]) * 1000  # mm
         note = p.page.inner_text("#ellipsoid-note")
         assert "95 %" in note and "2.7955" in note
+        drawn = [float(x) for x in re.search(r"semi-axes ([\d.]+) × ([\d.]+) × ([\d.]+) mm", note).groups()]
+        assert np.allclose(drawn, expect, atol=0.051), (drawn, expect)
+        p.page.keyboard.press("e")  # 1 sigma
+        note = p.page.inner_text("#ellipsoid-note")
+        assert "1σ ellipsoid" in note and "19.9 %" in note
+        drawn = [float(x) for x in re.search(r"semi-axes ([\d.]+) × ([\d.]+) × ([\d.]+) mm", note).groups()]
+        assert np.allclose(drawn, expect / 2.7955, atol=0.051), (drawn, expect)
+        p.page.keyboard.press("e")
         p.page.fill("#pt-code", "roof corner")
         p.page.focus("#pt-code")
         with p.page.expect_response(lambda r: r.url.endswith("/points") and r.request.method == "POST") as resp:
@@ -227,6 +255,12 @@ def test_shifted_model_matrix_stores_georeferenced_point(server, browser, projec
         drawn = p.page.evaluate(f"""() => {{ const e = gsgeo.viewer.dataSources.get(0).entities.getById('pt:{stored["id"]}');
             const q = e.position.getValue(gsgeo.viewer.clock.currentTime); return [q.x, q.y, q.z]; }}""")
         assert np.linalg.norm(np.array(drawn) - rendered) < 0.005
+        # reopen: exclude ray 1 and bring it back from the point's detail panel
+        row = f"#points-table tbody tr[data-id='{stored['id']}']"
+        p.page.click("#point-detail button:text('exclude')")
+        p.page.wait_for_function(f"document.querySelector(\"{row} td:nth-child(8)\").textContent === '2+1✕'")
+        p.page.click("#point-detail button:text('restore')")
+        p.page.wait_for_function(f"document.querySelector(\"{row} td:nth-child(8)\").textContent === '3'")
         assert p.errors == []
     finally:
         p.close()
@@ -298,7 +332,8 @@ def test_lines_polygons_and_export(server, browser, project, tmp_path):
             p.page.keyboard.press("Enter")
         poly = resp.value.json()
         xy = np.array([MARKERS[k][:2] for k in ("roof_ne", "ground_sw", "roof_c")])
-        area = 0.5 * abs(np.cross(xy[1] - xy[0], xy[2] - xy[0]))
+        (ux, uy), (vx, vy) = xy[1] - xy[0], xy[2] - xy[0]
+        area = 0.5 * abs(ux * vy - uy * vx)
         assert abs(poly["measures"]["area_2d"] - area) < 0.01
         p.page.wait_for_selector("#features-table tbody tr:nth-child(2)")
         p.shot("07_line_polygon")
