@@ -18,8 +18,18 @@ import pyproj
 import pytest
 
 from tests.e2e.scene import MARKERS
-from tests.e2e.workplace import (AIM_JS, ARTIFACTS, CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, SCENE,
-                                 VIEWPOINTS, enu_to_ecef, make_data_dir, up_vector)
+from tests.e2e.workplace import (
+    AIM_JS,
+    ARTIFACTS,
+    CESIUM_JS,
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    SCENE,
+    VIEWPOINTS,
+    enu_to_ecef,
+    make_data_dir,
+    up_vector,
+)
 
 pytestmark = pytest.mark.e2e
 
@@ -141,6 +151,11 @@ def _grid_of(ecef) -> tuple[float, float, float]:
     return e, n, h
 
 
+def _posted(kind: str):
+    """Predicate for page.expect_response: the POST that creates a point, line or polygon."""
+    return lambda r: r.url.endswith(f"/{kind}") and r.request.method == "POST"
+
+
 def _measure(p: Page, target_rendered, views, code: str = "") -> dict:
     p.page.keyboard.press("m")
     p.page.wait_for_selector("#measure-panel:not([hidden])")
@@ -151,7 +166,7 @@ def _measure(p: Page, target_rendered, views, code: str = "") -> dict:
             p.wait_solution()
     if code:
         p.page.fill("#pt-code", code)
-    with p.page.expect_response(lambda r: r.url.endswith("/points") and r.request.method == "POST") as resp:
+    with p.page.expect_response(_posted("points")) as resp:
         p.page.keyboard.press("Enter")
     assert resp.value.status == 201, resp.value.text()
     p.page.wait_for_selector("#measure-panel", state="hidden")
@@ -207,7 +222,7 @@ def test_create_project_and_measure_known_point(server, browser):
         p.page.keyboard.press("e")
         p.page.fill("#pt-code", "roof corner")
         p.page.focus("#pt-code")
-        with p.page.expect_response(lambda r: r.url.endswith("/points") and r.request.method == "POST") as resp:
+        with p.page.expect_response(_posted("points")) as resp:
             p.page.keyboard.press("Enter")
         stored = resp.value.json()
         p.page.wait_for_selector("#points-table tbody tr[data-id='P1']")
@@ -252,7 +267,8 @@ def test_shifted_model_matrix_stores_georeferenced_point(server, browser, projec
         rec = stored["record"]
         assert abs(rec["easting"] - e) < 0.005 and abs(rec["height"] - h) < 0.005
         # the marker of the stored point is drawn where the tileset is now rendered
-        drawn = p.page.evaluate(f"""() => {{ const e = gsgeo.viewer.dataSources.get(0).entities.getById('pt:{stored["id"]}');
+        drawn = p.page.evaluate(f"""() => {{
+            const e = gsgeo.viewer.dataSources.get(0).entities.getById('pt:{stored["id"]}');
             const q = e.position.getValue(gsgeo.viewer.clock.currentTime); return [q.x, q.y, q.z]; }}""")
         assert np.linalg.norm(np.array(drawn) - rendered) < 0.005
         # reopen: exclude ray 1 and bring it back from the point's detail panel
@@ -316,7 +332,7 @@ def test_lines_polygons_and_export(server, browser, project, tmp_path):
         p.page.keyboard.press("l")
         for name in ("roof_ne", "ground_sw"):
             p.page.click(f"#points-table tbody tr[data-id='{ids[name]}']")
-        with p.page.expect_response(lambda r: r.url.endswith("/lines") and r.request.method == "POST") as resp:
+        with p.page.expect_response(_posted("lines")) as resp:
             p.page.keyboard.press("Enter")
         line = resp.value.json()
         a, b = (np.array(MARKERS[k]) for k in ("roof_ne", "ground_sw"))
@@ -328,7 +344,7 @@ def test_lines_polygons_and_export(server, browser, project, tmp_path):
             p.click_world(_known(name), (200.0, 70.0, 16.0, (0.0, 0.0, 0.0)))
             p.page.wait_for_timeout(200)
         assert p.page.inner_text("#feature-points").count("→") == 2
-        with p.page.expect_response(lambda r: r.url.endswith("/polygons") and r.request.method == "POST") as resp:
+        with p.page.expect_response(_posted("polygons")) as resp:
             p.page.keyboard.press("Enter")
         poly = resp.value.json()
         xy = np.array([MARKERS[k][:2] for k in ("roof_ne", "ground_sw", "roof_c")])

@@ -67,16 +67,17 @@ AIM_JS = """([target, azDeg, elDeg, range, lookOffset]) => {
                                  range * Math.cos(el) * Math.cos(az), range * Math.sin(el));
   const pos = C.Matrix4.multiplyByPoint(enu, local, new C.Cartesian3());
   const look = C.Matrix4.multiplyByPoint(enu, new C.Cartesian3(...lookOffset), new C.Cartesian3());
-  const dir = C.Cartesian3.normalize(C.Cartesian3.subtract(look, pos, new C.Cartesian3()), new C.Cartesian3());
+  const V = () => new C.Cartesian3();
+  const dir = C.Cartesian3.normalize(C.Cartesian3.subtract(look, pos, V()), V());
   const upGuess = C.Matrix4.multiplyByPointAsVector(enu, C.Cartesian3.UNIT_Z, new C.Cartesian3());
-  const right = C.Cartesian3.normalize(C.Cartesian3.cross(dir, upGuess, new C.Cartesian3()), new C.Cartesian3());
+  const right = C.Cartesian3.normalize(C.Cartesian3.cross(dir, upGuess, V()), V());
   const up = C.Cartesian3.cross(right, dir, new C.Cartesian3());
   v.camera.setView({destination: pos, orientation: {direction: dir, up: up}});
   const win = C.SceneTransforms.worldToWindowCoordinates(v.scene, K);
   const ray = v.camera.getPickRay(win);
   const w = C.Cartesian3.subtract(K, ray.origin, new C.Cartesian3());
   const along = C.Cartesian3.dot(w, ray.direction);
-  const perp = C.Cartesian3.subtract(w, C.Cartesian3.multiplyByScalar(ray.direction, along, new C.Cartesian3()), new C.Cartesian3());
+  const perp = C.Cartesian3.subtract(w, C.Cartesian3.multiplyByScalar(ray.direction, along, V()), V());
   const rect = v.scene.canvas.getBoundingClientRect();
   return {x: rect.left + win.x, y: rect.top + win.y, win: [win.x, win.y],
           canvas: [v.scene.canvas.clientWidth, v.scene.canvas.clientHeight],
