@@ -696,3 +696,14 @@ def test_geographic_check_points_take_the_measured_points_path(client):
     assert abs(pts["B"]["dE"]) < 1e-4 and pts["B"]["dH"] is None
     assert abs(pts["C"]["dN"]) < 1e-4 and abs(pts["C"]["dH"]) < 1e-4
     assert acc["counts"]["matched"] == 3 and acc["counts"]["matched_vertical"] == 2
+
+
+def test_resolve_recomputes_from_rays(client, project):
+    add_point(client, project, 0)
+    before = client.get(f"/api/projects/{project}/points/T0").json()["record"]
+    r = client.post(f"/api/projects/{project}/resolve")
+    assert r.status_code == 200 and r.json()["settings_rev"] == 1
+    assert r.json()["counts"]["n_points"] == 1 and r.json()["counts"]["n_failed"] == 0
+    after = client.get(f"/api/projects/{project}/points/T0").json()["record"]
+    assert after["easting"] == before["easting"]
+    assert client.post("/api/projects/none/resolve").status_code == 404

@@ -152,6 +152,14 @@ def patch_project(pid: PID, body: m.ProjectPatch, request: Request) -> dict[str,
     return project_json(svc(request).update_project(pid, changes))
 
 
+@router.post("/projects/{pid}/resolve", summary="Re-solve every point from its rays")
+def resolve_project(pid: PID, request: Request) -> dict[str, Any]:
+    s = svc(request)
+    p = s.resolve_all(pid)
+    return project_json(p) | {"counts": {k: v for k, v in s.project_summary(pid).items()
+                                         if k != "project"}}
+
+
 @router.delete("/projects/{pid}", status_code=204, summary="Delete a project and all it holds")
 def delete_project(pid: PID, request: Request) -> Response:
     svc(request).delete_project(pid)

@@ -182,6 +182,16 @@ class Projects:
             tx.update_project(p)
             return p
 
+    def resolve_all(self, pid: str) -> Project:
+        """Re-solve every point from its rays with the current settings (one transaction),
+        e.g. after a geoid grid file was replaced."""
+        with self.store.transaction() as tx:
+            p = self._project(tx, pid)
+            p.settings_rev += 1
+            self._resolve_all(tx, p)
+            tx.update_project(p)
+            return p
+
     def _resolve_all(self, tx: Transaction, p: Project) -> None:
         for pt in tx.list_points(p.id):
             self._solve_into(pt, p)
