@@ -12,6 +12,7 @@ counts, BOOLEAN for flags.
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from pathlib import Path
 
@@ -21,6 +22,8 @@ import shapely
 from gsgeo.crs.resolve import parse_crs
 from gsgeo.errors import InputError
 from gsgeo.export.tables import ExportData, Table
+
+SYNC_OPTION = "OGR_SQLITE_SYNCHRONOUS"
 
 
 def gpkg_crs(text: str) -> tuple[str, dict[str, str]]:
@@ -95,8 +98,24 @@ def write_gpkg(path: Path, data: ExportData) -> None:
                        data.crs if z3 else data.horizontal_crs,
                        "check points (ground truth); d_* = measured - check"))
     try:
-        for k, (name, geoms, table, gtype, crs, desc) in enumerate(layers):
-            wkb = shapely.to_wkb(geoms, output_dimension=3 if gtype.endswith("Z") else 2)
-            _write_layer(path, name, wkb, table, gtype, crs, append=k > 0, description=desc)
+        with _no_sqlite_sync():
+            for k, (name, geoms, table, gtype, crs, desc) in enumerate(layers):
+                wkb = shapely.to_wkb(geoms, output_dimension=3 if gtype.endswith("Z") else 2)
+                _write_layer(path, name, wkb, table, gtype, crs, append=k > 0, description=desc)
     except (DataSourceError, DataLayerError, FieldError, GeometryError) as exc:
         raise InputError(f"GDAL could not write the GeoPackage: {exc}") from None
+
+
+@contextlib.contextmanager
+def _no_sqlite_sync():
+    """SQLite without fsync per commit: the file is a temporary one that gsgeo.export.atomic
+    fsyncs once before renaming it, so durability is kept at a fraction of the cost.
+    (A GDAL config option is process-wide; either value is safe for a concurrent write.)"""
+    from pyogrio import get_gdal_config_option, set_gdal_config_options
+
+    old = get_gdal_config_option(SYNC_OPTION)
+    set_gdal_config_options({SYNC_OPTION: "OFF"})
+    try:
+        yield
+    finally:
+        set_gdal_config_options({SYNC_OPTION: old})

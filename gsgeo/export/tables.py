@@ -144,8 +144,12 @@ def _measurement_columns(ms: list) -> dict[str, Any] | None:
     return out
 
 
-def _column(values: list, kind: str, name: str) -> np.ndarray:
+def _column(values: list, kind: str, name: str, as_text: bool = True) -> np.ndarray:
     if kind == "str":
+        if not as_text:
+            out = np.empty(len(values), dtype=object)
+            out[:] = values
+            return out
         return np.array([None if v is None else str(v) for v in values], dtype=object)
     if kind == "int":
         return np.array(values, dtype=np.int32)
@@ -223,8 +227,11 @@ def ellipse_rings(e, n, major, minor, bearing_deg, unit_m: float = 1.0,
 
 
 def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
-            polygons: Iterable[Any] = (), check_points: Iterable[Any] = ()) -> ExportData:
+            polygons: Iterable[Any] = (), check_points: Iterable[Any] = (),
+            map_layers: bool = True) -> ExportData:
     """Validate and gather everything an export writes (see module docstring).
+
+    map_layers=False leaves out the rays and error ellipses (GeoPackage-only layers).
 
     Raises InputError (nothing measured, unknown or unsolved point ids, malformed input),
     GeometryError (a bad line or polygon, prefixed with its id) or CRSError (no grid CRS, or
@@ -239,6 +246,7 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
         why = f" ({len(failed)} point(s) could not be solved)" if failed else ""
         raise InputError(f"nothing to export: no measured points{why}")
     raw = _measurement_columns(solved)
+    as_text = raw is None  # records from JSON: make every text field a str
     if raw is None:
         recs = [_record(m) for m in solved]
         raw = {k: [r[k] for r in recs] for k in RECORD_KEYS}
@@ -267,7 +275,7 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
         raise CRSError(f"the measurements' CRS cannot be used for export: {exc}") from None
     crs_text = str(first["crs"])
 
-    cols = {k: _column(raw[k], POINT_TYPES[k], k) for k in RECORD_KEYS}
+    cols = {k: _column(raw[k], POINT_TYPES[k], k, as_text) for k in RECORD_KEYS}
     points = Table(cols, dict(POINT_TYPES))
     xyz = np.column_stack([cols["easting"], cols["northing"], cols["height"]])
     llh = np.column_stack([cols["lon"], cols["lat"], cols["h_wgs84"]])
@@ -282,10 +290,11 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
     data = ExportData(crs=crs_text, horizontal_crs=g.id, height_type=str(first["height_type"]),
                       vertical_datum=str(first["vertical_datum"]), points=points,
                       point_xyz=xyz, point_llh=llh)
-    _collect_rays(data, solved, xyz, ids)
+    if map_layers:
+        _collect_rays(data, solved, xyz, ids)
     _collect_features(data, lines, polygons, index, failed, ids, xyz, cov, g)
     ok = np.isfinite(cols["ellipse_major_95"]) & np.isfinite(cols["ellipse_minor_95"])
-    if ok.any():
+    if map_layers and ok.any():
         sel = np.flatnonzero(ok)
         data.ellipses = Table({
             "point_id": cols["point_id"][sel],
@@ -343,7 +352,6 @@ def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str
         org = np.concatenate([r[0] for _, r in parts])
     owner = np.repeat(have, counts)
     seg = np.stack([org, xyz[owner]], axis=1)
-    d = seg[:, 1] - seg[:, 0]
     pid = np.array(ids, dtype=object)[owner]
     data.ray_xyz = seg
     data.rays = Table({
@@ -354,9 +362,8 @@ def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str
         "residual_m": np.concatenate([np.asarray(r[2], dtype=float) for _, r in parts]),
         "outlier": np.concatenate([np.asarray(r[3], dtype=bool) for _, r in parts]),
         "excluded": np.concatenate([np.asarray(r[4], dtype=bool) for _, r in parts]),
-        "range_grid": np.sqrt(np.einsum("ki,ki->k", d, d)),
     }, {"point_id": "str", "ray_index": "int", "residual_px": "float", "residual_m": "float",
-        "outlier": "bool", "excluded": "bool", "range_grid": "float"})
+        "outlier": "bool", "excluded": "bool"})
 
 
 def _ids_text(pids: Sequence[str]) -> str:

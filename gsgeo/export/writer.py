@@ -57,7 +57,8 @@ def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
     """
     kind = format_for(path, fmt)
     target = check_target(path)
-    data = collect(measurements, lines=lines, polygons=polygons, check_points=check_points)
+    data = collect(measurements, lines=lines, polygons=polygons, check_points=check_points,
+                   map_layers=kind == "gpkg")
     with atomic_path(target) as tmp:
         if kind == "gpkg":
             from gsgeo.export.gpkg import write_gpkg
