@@ -339,6 +339,8 @@ function startMeasure(editPoint = null) {
     pointId: editPoint ? editPoint.id : nextPointId(),
     solution: null, error: null, seq: 0,
   };
+  $("#pt-id").value = state.measure.pointId;
+  $("#pt-id").disabled = Boolean(editPoint);
   $("#pt-code").value = editPoint ? editPoint.code : "";
   $("#pt-desc").value = editPoint ? editPoint.description : "";
   $("#btn-measure").classList.add("active");
@@ -417,7 +419,8 @@ async function finishMeasure() {
       pt = await api("PATCH", url, { rays: m.rays, code, description });
       if (excluded.length) pt = await api("PATCH", url, { excluded });
     } else {
-      pt = await api("POST", `/projects/${pid}/points`, { code, description, rays: m.rays, excluded });
+      const id = $("#pt-id").value.trim() || undefined;
+      pt = await api("POST", `/projects/${pid}/points`, { id, code, description, rays: m.rays, excluded });
     }
     endMeasure();
     await refreshProjectData();
@@ -812,6 +815,13 @@ async function loadAccuracy() {
       h("td", {}, d.id), h("td", { class: "num" }, mm(d.dE)), h("td", { class: "num" }, mm(d.dN)),
       h("td", { class: "num" }, mm(d.dH)), h("td", { class: "num" }, mm(d.d3D))));
     const c = acc.counts;
+    if (!c.matched) {
+      box.replaceChildren(h("p", { class: "note", id: "accuracy-summary" },
+        `${c.check_points} check points (${c.check_points_not_measured.slice(0, 12).join(", ")}`
+        + `${c.check_points_not_measured.length > 12 ? ", …" : ""}); none measured yet. Give a measured point `
+        + "the ID of a check point (ID field while measuring) to compare it."));
+      return;
+    }
     box.replaceChildren(
       h("table", { class: "grid", id: "accuracy-table" },
         h("thead", {}, h("tr", {}, h("th", {}, "Point"), h("th", {}, "dE mm"), h("th", {}, "dN mm"), h("th", {}, "dH mm"), h("th", {}, "d3D mm"))),
@@ -921,7 +931,7 @@ document.addEventListener("keydown", (ev) => {
     if (ev.key === "Escape") { $("#project-dialog").hidden = true; ev.preventDefault(); }
     return;
   }
-  const inPanel = typing && (t.id === "pt-code" || t.id === "pt-desc" || t.id === "feat-code");
+  const inPanel = typing && (t.id === "pt-id" || t.id === "pt-code" || t.id === "pt-desc" || t.id === "feat-code");
   if (typing && !(inPanel && (ev.key === "Enter" || ev.key === "Escape"))) return;
   const key = ev.key;
   if (state.mode === "measure") {
