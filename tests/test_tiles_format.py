@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -225,3 +226,43 @@ def test_cli_summary_and_errors(tmp_path, rng, capsys):
     rc = main(["tiles", str(tmp_path / "in.ply"), "-o", str(tmp_path / "o5"),
                "--transform", str(tmp_path / "shear.json")])
     assert rc == 2 and "uniform scale" in capsys.readouterr().err
+
+
+COMPRESSED = Path(__file__).parent / "data" / "splats_1000_sh3.compressed.ply"
+
+
+def test_compressed_ply_from_splat_transform(tmp_path):
+    """tests/data/splats_1000_sh3.compressed.ply was written by @playcanvas/splat-transform
+    3.7.0 from random_splats(default_rng(3), 1000, 3, extent=20) saved as an INRIA PLY; it
+    must decode to those splats within the compressed format's quantisation."""
+    from gsgeo.tiles.splats import quat_to_matrix
+    from tests.tiles_helpers import match, rotation_error_deg, sigmoid
+    want = random_splats(np.random.default_rng(3), 1000, 3, extent=20)
+    got = read_ply(COMPRESSED)
+    assert got.count == 1000 and got.sh_degree == 3
+    idx = match(want.positions, got.positions)   # splat-transform reorders splats
+    assert len(np.unique(idx)) == 1000
+    dist = np.linalg.norm(got.positions[idx] - want.positions, axis=1)
+    g = got.take(idx)
+    # 11/10-bit positions over each 256-splat chunk's box (about 40 m here)
+    assert dist.max() < 0.03
+    assert np.abs(g.scales - want.scales).max() < 0.005          # 10-11 bits over ~4
+    assert np.abs(sigmoid(g.opacities) - sigmoid(want.opacities)).max() <= 0.5 / 255 + 1e-4
+    assert np.abs(g.colors - want.colors).max() < 0.02
+    assert np.abs(g.sh - want.sh).max() <= 4 / 256 + 1e-5       # 8-bit over [-4, 4]
+    assert rotation_error_deg(quat_to_matrix(want.rotations.astype(float)),
+                              g.rotations).max() < 0.3
+    summary = build_tileset(COMPRESSED, tmp_path / "out", ORIGIN, progress=None)
+    assert summary.splats_written == 1000 and summary.sh_degree == 3
+
+
+def test_broken_compressed_ply_is_named(tmp_path):
+    data = COMPRESSED.read_bytes()
+    head = data[:data.index(b"end_header\n") + 11]
+    (tmp_path / "t.ply").write_bytes(head + b"\0" * 100)
+    with pytest.raises(InputError, match="truncated"):
+        read_layout(tmp_path / "t.ply")
+    bad = head.replace(b"property uint packed_scale\n", b"property uint packed_scal3\n")
+    (tmp_path / "b.ply").write_bytes(bad + data[len(head):])
+    with pytest.raises(InputError, match="lacks packed_scale"):
+        read_layout(tmp_path / "b.ply")

@@ -133,6 +133,17 @@ def _source(path: Path, block: int, ring: int):
     if suffix != ".ply":
         raise InputError(f"{path}: unsupported input; expected a .ply or .spz file")
     layout = ply.read_layout(path)
+    if isinstance(layout, ply.CompressedLayout):
+        def cbounds():
+            lo, hi, n = np.full(3, np.inf), np.full(3, -np.inf), 0
+            chunks = np.fromfile(layout.path, layout.chunk_dtype, layout.n_chunks,
+                                 offset=layout.chunk_offset)
+            for i, c in enumerate("xyz"):
+                lo[i], hi[i] = np.nanmin(chunks[f"min_{c}"]), np.nanmax(chunks[f"max_{c}"])
+            n = layout.count if np.isfinite(lo).all() and np.isfinite(hi).all() else 0
+            return lo, hi, n
+        return (layout.count, layout.sh_degree, layout.size_bytes, cbounds,
+                lambda: ply.iter_compressed(layout, block))
     return (layout.count, layout.sh_degree, layout.size_bytes,
             lambda: ply.ply_bounds(layout, sample=CENTRE_SAMPLE),
             lambda: ply.iter_ply(layout, block, ring))

@@ -8,6 +8,8 @@ property types):
   0-3). f_rest is channel-major, opacity a logit, scales natural logs, rot w-first.
 - The same with 8-bit ``red green blue`` instead of ``f_dc_*`` (some exporters write colours
   that way): f_dc = (c / 255 - 0.5) / C0.
+- PlayCanvas/SuperSplat compressed PLY (``chunk`` + packed ``vertex`` [+ ``sh``] elements),
+  as SuperSplat and splat-transform write it.
 
 Extra properties are ignored. Anything else is rejected naming the missing properties.
 """
@@ -34,6 +36,132 @@ _REQUIRED = ["x", "y", "z", "opacity", "scale_0", "scale_1", "scale_2",
 
 
 @dataclass
+class CompressedLayout:
+    """PlayCanvas/SuperSplat compressed PLY: per 256 splats a ``chunk`` record of bounds, per
+    splat four packed u32 (position 11-10-11, rotation 2+10+10+10, log-scale 11-10-11,
+    colour RGBA 8-8-8-8), optionally an ``sh`` element of u8 f_rest_* (channel-major)."""
+    path: Path
+    count: int
+    chunk_dtype: np.dtype
+    chunk_offset: int
+    n_chunks: int
+    vertex_dtype: np.dtype
+    vertex_offset: int
+    sh_dtype: np.dtype | None
+    sh_offset: int
+    sh_degree: int
+    n_rest: int
+    fmt: str = "compressed"
+
+    @property
+    def size_bytes(self) -> int:
+        return os.path.getsize(self.path)
+
+
+_CHUNK_REQUIRED = ["min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x",
+                   "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z"]
+_PACKED = ["packed_position", "packed_rotation", "packed_scale", "packed_color"]
+
+
+def _compressed_layout(path, fmt, elements, header_end) -> CompressedLayout:
+    if fmt != "binary_little_endian":
+        raise InputError(f"{path}: a compressed PLY must be binary little endian")
+    offs, els = {}, {}
+    off = header_end
+    for name, count, props in elements:
+        if any(t == "list" for _, t in props):
+            raise InputError(f"{path}: list properties in a compressed PLY")
+        dt = np.dtype([(n, "<" + _TYPES[t]) for n, t in props])
+        offs[name], els[name] = off, (count, dt)
+        off += count * dt.itemsize
+    if os.path.getsize(path) < off:
+        raise InputError(f"{path}: file is truncated")
+    if "chunk" not in els or "vertex" not in els:
+        raise InputError(f"{path}: a compressed PLY needs 'chunk' and 'vertex' elements")
+    n_chunks, cdt = els["chunk"]
+    count, vdt = els["vertex"]
+    missing = [n for n in _CHUNK_REQUIRED if n not in cdt.names] + \
+        [n for n in _PACKED if n not in vdt.names]
+    if missing:
+        raise InputError(f"{path}: compressed PLY lacks {', '.join(missing)}")
+    if n_chunks * 256 < count:
+        raise InputError(f"{path}: {n_chunks} chunks cannot hold {count} splats")
+    sh_dt, n_rest = None, 0
+    if "sh" in els:
+        sh_count, sh_dt = els["sh"]
+        n_rest = len(sh_dt.names)
+        if sh_count != count or n_rest % 3 or n_rest // 3 not in SH_DEGREE_OF:
+            raise InputError(f"{path}: the sh element has {n_rest} properties for {sh_count} "
+                             f"splats; expected 9, 24 or 45 for {count}")
+    return CompressedLayout(path, count, cdt, offs["chunk"], n_chunks, vdt, offs["vertex"],
+                            sh_dt, offs.get("sh", 0), SH_DEGREE_OF[n_rest // 3], n_rest)
+
+
+def _unorm(v: np.ndarray, shift: int, bits: int) -> np.ndarray:
+    return ((v >> np.uint32(shift)) & np.uint32((1 << bits) - 1)).astype(np.float32) / \
+        np.float32((1 << bits) - 1)
+
+
+def _lerp3(chunks: np.ndarray, ci: np.ndarray, names: list[str], packed: np.ndarray,
+           layout=((21, 11), (11, 10), (0, 11))) -> np.ndarray:
+    out = np.empty((packed.shape[0], 3), np.float32)
+    for i, (shift, bits) in enumerate(layout):
+        t = _unorm(packed, shift, bits)
+        lo = chunks["min_" + names[i]][ci]
+        hi = chunks["max_" + names[i]][ci]
+        out[:, i] = lo * (1 - t) + hi * t
+    return out
+
+
+def iter_compressed(layout: CompressedLayout, block: int = 65_536) -> Iterator[Splats]:
+    """Splats of a compressed PLY in blocks (block a multiple of 256)."""
+    block = max(256, block // 256 * 256)
+    chunks = np.fromfile(layout.path, layout.chunk_dtype, layout.n_chunks,
+                         offset=layout.chunk_offset)
+    vert = np.memmap(layout.path, layout.vertex_dtype, "r", layout.vertex_offset,
+                     (layout.count,))
+    sh_all = None if layout.sh_dtype is None else np.memmap(
+        layout.path, layout.sh_dtype, "r", layout.sh_offset, (layout.count,))
+    for start in range(0, layout.count, block):
+        v = np.array(vert[start:start + block])
+        n = v.shape[0]
+        ci = (np.arange(start, start + n) >> 8)
+        pos = _lerp3(chunks, ci, ["x", "y", "z"], v["packed_position"]).astype(np.float64)
+        scales = _lerp3(chunks, ci, ["scale_x", "scale_y", "scale_z"], v["packed_scale"])
+        pr = v["packed_rotation"]
+        largest = (pr >> np.uint32(30)).astype(np.int64)
+        abc = np.stack([(_unorm(pr, s, 10) - np.float32(0.5)) * np.float32(np.sqrt(2))
+                        for s in (20, 10, 0)], axis=1)
+        wxyz = np.empty((n, 4), np.float32)
+        # the three stored components fill the other slots in ascending order
+        slots = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])[largest]
+        np.put_along_axis(wxyz, slots, abc, axis=1)
+        np.put_along_axis(wxyz, largest[:, None],
+                          np.sqrt(np.maximum(0, 1 - (abc * abc).sum(axis=1)))[:, None], axis=1)
+        rotations = wxyz[:, [1, 2, 3, 0]]
+        pc = v["packed_color"]
+        rgb = np.stack([_unorm(pc, s, 8) for s in (24, 16, 8)], axis=1)
+        if "min_r" in layout.chunk_dtype.names:
+            for i, c in enumerate("rgb"):
+                lo, hi = chunks[f"min_{c}"][ci], chunks[f"max_{c}"][ci]
+                rgb[:, i] = lo * (1 - rgb[:, i]) + hi * rgb[:, i]
+        colors = (rgb - np.float32(0.5)) / np.float32(SH_C0)
+        alpha = np.clip(_unorm(pc, 0, 8), 0.25 / 255, 254.75 / 255)
+        opacities = np.log(alpha) - np.log1p(-alpha)
+        k = layout.n_rest // 3
+        if k:
+            b = np.array(sh_all[start:start + n]).view(np.uint8).reshape(n, layout.n_rest)
+            b = b[:, [layout.sh_dtype.names.index(f"f_rest_{i}") for i in range(layout.n_rest)]]
+            nrm = (b.astype(np.float32) + np.float32(0.5)) / np.float32(256)
+            nrm[b == 0], nrm[b == 255] = 0.0, 1.0
+            sh = ((nrm - np.float32(0.5)) * np.float32(8)).reshape(n, 3, k).transpose(0, 2, 1)
+        else:
+            sh = np.zeros((n, 0, 3), np.float32)
+        yield Splats(pos, scales, rotations, opacities.astype(np.float32), colors,
+                     np.ascontiguousarray(sh))
+
+
+@dataclass
 class PlyLayout:
     path: Path
     fmt: str                 # binary_little_endian | binary_big_endian | ascii
@@ -49,7 +177,7 @@ class PlyLayout:
         return os.path.getsize(self.path)
 
 
-def read_layout(path: str | os.PathLike) -> PlyLayout:
+def read_layout(path: str | os.PathLike) -> PlyLayout | CompressedLayout:
     """Parse the header of a 3DGS PLY and check its vertex properties."""
     path = Path(path)
     try:
@@ -103,8 +231,7 @@ def read_layout(path: str | os.PathLike) -> PlyLayout:
     if any(t == "list" for _, t in props):
         raise InputError(f"{path}: the vertex element has list properties; not a 3DGS PLY")
     if "chunk" in [e[0] for e in elements] or "packed_position" in names:
-        raise InputError(f"{path}: compressed (SuperSplat/PlayCanvas) PLY is not supported; "
-                         "decompress it to a standard 3DGS PLY first")
+        return _compressed_layout(path, fmt, elements, header_end)
     has_dc = all(f"f_dc_{i}" in names for i in range(3))
     has_rgb = all(c in names for c in ("red", "green", "blue"))
     missing = [n for n in _REQUIRED if n not in names]
@@ -245,6 +372,8 @@ def ply_bounds(layout: PlyLayout, sample: int | None = None,
 def read_ply(path: str | os.PathLike) -> Splats:
     """Read a whole 3DGS PLY into memory (for tests and small files)."""
     layout = read_layout(path)
+    if isinstance(layout, CompressedLayout):
+        return Splats.concatenate(list(iter_compressed(layout)))
     parts = list(iter_ply(layout))
     if not parts:
         return _records_to_splats(np.zeros(0, layout.dtype), layout)
