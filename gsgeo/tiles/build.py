@@ -293,7 +293,7 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
         bar = Progress(progress, n, "writing")
 
         def write(node: lod.Node) -> int:
-            b = held.take(node.index)
+            b = held.take(np.sort(node.index))   # sorted: a near-sequential gather
             blob = spz.pack(b, sh_degree, version=spz_version, fractional_bits=frac, level=level)
             p = b.positions
             data = gltf.tile_glb(blob, b.count, sh_degree, p.min(axis=0), p.max(axis=0))

@@ -51,9 +51,10 @@ def importance(alphas_u8: np.ndarray, scales_u8: np.ndarray) -> np.ndarray:
     return alphas_u8.astype(np.float32) * np.exp(log_vol * (2.0 / 3.0))
 
 
-def _split(pos_t: np.ndarray, idx: np.ndarray) -> list[np.ndarray]:
-    """Split indices at medians; pos_t is (3, N) (column-major work keeps reductions fast)."""
+def _split(pos_t: np.ndarray, radius: np.ndarray, idx: np.ndarray):
+    """Split indices at medians; returns (indices, lo, hi) per child. pos_t is (3, N)."""
     p = pos_t[:, idx]
+    r = radius[idx]
     spread = p.max(axis=1) - p.min(axis=1)
     axes = [a for a in np.argsort(-spread) if spread[a] >= 0.5 * spread.max()] or [0]
     parts = [np.arange(idx.shape[0])]
@@ -67,13 +68,21 @@ def _split(pos_t: np.ndarray, idx: np.ndarray) -> list[np.ndarray]:
             order = np.argpartition(p[a, part], half)
             nxt += [part[order[:half]], part[order[half:]]]
         parts = nxt
-    # sorted indices keep later gathers (pos[idx], attributes per tile) close to sequential
-    return [np.sort(idx[part]) for part in parts if part.shape[0]]
+    out = []
+    for part in parts:
+        if part.shape[0]:
+            # centres' box grown by the largest splat radius: a little loose but cheap, and
+            # a parent's box still contains its children's
+            pp, rr = p[:, part], r[part].max()
+            out.append((idx[np.sort(part)], pp.min(axis=1) - rr, pp.max(axis=1) + rr))
+    return out
 
 
 def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
                max_splats: int = 131_072, parent_splats: int | None = None) -> Node:
-    """Build the tile tree over splat centres ``pos`` (N, 3) with box radii ``radius`` (N,)."""
+    """Build the tile tree over splat centres ``pos`` (N, 3) with box radii ``radius`` (N,).
+
+    Parents' indices are not sorted; sort them before gathering attributes."""
     if max_splats < 1:
         raise ValueError("max_splats must be positive")
     if parent_splats is None:
@@ -82,14 +91,6 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
     n = pos.shape[0]
     idx_dtype = np.int32 if n < 2**31 else np.int64
     pos_t = np.ascontiguousarray(np.asarray(pos).T)
-
-    def box(idx):
-        # centres' box grown by the largest splat radius: a little loose, but cheap, and
-        # a parent's box still contains its children's
-        p = pos_t[:, idx]
-        r = radius[idx].max()
-        return p.min(axis=1) - r, p.max(axis=1) + r
-
     root_idx = np.arange(n, dtype=idx_dtype)
     if n:
         r = radius.max()
@@ -104,10 +105,9 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
         if idx.shape[0] <= max_splats:
             continue
         order = np.argpartition(-prominence[idx], parent_splats - 1)
-        keep, rest = idx[order[:parent_splats]], idx[order[parent_splats:]]
-        node.index = np.sort(keep)
-        for i, part in enumerate(_split(pos_t, rest)):
-            clo, chi = box(part)
+        # argpartition scrambles the order; sorted indices keep gathers near-sequential
+        node.index, rest = idx[order[:parent_splats]], np.sort(idx[order[parent_splats:]])
+        for i, (part, clo, chi) in enumerate(_split(pos_t, radius, rest)):
             child = Node(part, clo, chi, node.level + 1, f"{node.name}_{i}")
             node.children.append(child)
             stack.append(child)
