@@ -15,6 +15,7 @@ import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from operator import attrgetter
 from typing import Any
 
 import numpy as np
@@ -96,6 +97,11 @@ def _record(m: Any) -> dict:
     return m.record()
 
 
+def _all_measurements(items: list) -> bool:
+    """All items are gsgeo.crs Measurement objects (one set of types, no per-item frame)."""
+    return all(t.__name__ == "Measurement" for t in set(map(type, items)))
+
+
 def _measurement_columns(ms: list) -> dict[str, Any] | None:
     """The point-schema columns of Measurement objects without a record() per point.
 
@@ -103,41 +109,39 @@ def _measurement_columns(ms: list) -> dict[str, Any] | None:
     the per-point numpy reductions done once over all points. None when an object is not a
     Measurement with a grid point and covariance (the caller then uses record()).
     """
-    if not all(type(m).__name__ == "Measurement" for m in ms):
+    if not _all_measurements(ms):
         return None
-    grids = [m.grid for m in ms]
-    if any(g is None or g.covariance is None for g in grids):
+    def attr(objs, name):
+        return list(map(attrgetter(name), objs))
+
+    grids = attr(ms, "grid")
+    if type(None) in set(map(type, grids)):
         return None
-    sols = [m.solution for m in ms]
-    cov = np.array([g.covariance for g in grids], dtype=np.float64)
-    exc = [m.excluded for m in ms]
+    covs = attr(grids, "covariance")
+    if type(None) in set(map(type, covs)):
+        return None
+    sols = attr(ms, "solution")
+    cov = np.array(covs, dtype=np.float64)
+    exc = attr(ms, "excluded")
     n_all = np.fromiter(map(len, exc), dtype=np.int64, count=len(exc))
     n_excl = np.add.reduceat(np.concatenate(exc).astype(np.int64), np.cumsum(n_all) - n_all)
-    px = [s.residuals_px for s in sols]
-    if all(v is not None for v in px):
+    px = attr(sols, "residuals_px")
+    if type(None) not in set(map(type, px)):
         lens = np.fromiter(map(len, px), dtype=np.int64, count=len(px))
-        max_px = np.maximum.reduceat(np.concatenate(px), np.cumsum(lens) - lens).tolist()
+        max_px: Any = np.maximum.reduceat(np.concatenate(px), np.cumsum(lens) - lens)
     else:  # a mix of angular and unweighted points
         max_px = [None if v is None else float(np.max(v)) for v in px]
-    out: dict[str, Any] = {
-        "point_id": [m.point_id for m in ms], "code": [m.code for m in ms],
-        "description": [m.description for m in ms],
-        "easting": [g.easting for g in grids], "northing": [g.northing for g in grids],
-        "height": [g.height for g in grids], "height_type": [g.height_type for g in grids],
-        "vertical_datum": [g.vertical_datum for g in grids], "crs": [g.crs for g in grids],
-        "sigma_e": [g.sigma_e for g in grids], "sigma_n": [g.sigma_n for g in grids],
-        "sigma_h": [g.sigma_h for g in grids],
-        "ellipse_major_95": [g.ellipse_major_95 for g in grids],
-        "ellipse_minor_95": [g.ellipse_minor_95 for g in grids],
-        "ellipse_bearing_deg": [g.ellipse_bearing_deg for g in grids],
-        "sigma0": [float(s.sigma0) for s in sols], "n_rays": (n_all - n_excl).tolist(),
-        "max_angle_deg": [float(s.max_angle_deg) for s in sols],
-        "rms_m": [float(s.rms_m) for s in sols], "max_residual_px": max_px,
-        "lon": [m.lon for m in ms], "lat": [m.lat for m in ms], "h_wgs84": [m.h_wgs84 for m in ms],
-        "operation": [g.operation for g in grids],
-        "operation_accuracy_m": [g.operation_accuracy_m for g in grids],
-        "measured_at": [m.measured_at for m in ms],
-    }
+    out: dict[str, Any] = {k: attr(ms, k) for k in ("point_id", "code", "description")}
+    for k in ("easting", "northing", "height", "height_type", "vertical_datum", "crs",
+              "sigma_e", "sigma_n", "sigma_h", "ellipse_major_95", "ellipse_minor_95",
+              "ellipse_bearing_deg", "operation", "operation_accuracy_m"):
+        out[k] = attr(grids, k)
+    for k in ("sigma0", "max_angle_deg", "rms_m"):
+        out[k] = attr(sols, k)  # numbers: made float64 columns by the caller
+    out["n_rays"] = n_all - n_excl
+    out["max_residual_px"] = max_px
+    for k in ("lon", "lat", "h_wgs84", "measured_at"):
+        out[k] = attr(ms, k)
     for k, (a, b) in {"cov_ee": (0, 0), "cov_en": (0, 1), "cov_eh": (0, 2), "cov_nn": (1, 1),
                       "cov_nh": (1, 2), "cov_hh": (2, 2)}.items():
         out[k] = cov[:, a, b]
@@ -238,10 +242,13 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
     measurements in different CRSs).
     """
     items = list(measurements)
-    fail = [_is_failure(m) for m in items]
-    failed = {str(_get(m, "point_id")): str(_get(m, "error"))
-              for m, f in zip(items, fail, strict=True) if f}
-    solved = [m for m, f in zip(items, fail, strict=True) if not f] if failed else items
+    failed: dict[str, str] = {}
+    solved = items
+    if not _all_measurements(items):
+        fail = [_is_failure(m) for m in items]
+        failed = {str(_get(m, "point_id")): str(_get(m, "error"))
+                  for m, f in zip(items, fail, strict=True) if f}
+        solved = [m for m, f in zip(items, fail, strict=True) if not f]
     if not solved:
         why = f" ({len(failed)} point(s) could not be solved)" if failed else ""
         raise InputError(f"nothing to export: no measured points{why}")
@@ -250,25 +257,25 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
     if raw is None:
         recs = [_record(m) for m in solved]
         raw = {k: [r[k] for r in recs] for k in RECORD_KEYS}
-    ids = [str(v) for v in raw["point_id"]]
-    no_grid = [i for i, (e, c) in enumerate(zip(raw["easting"], raw["crs"], strict=True))
-               if e is None or c is None]
-    if no_grid:
+    ids = [str(v) for v in raw["point_id"]] if as_text else raw["point_id"]
+    if type(None) in set(map(type, raw["easting"])) | set(map(type, raw["crs"])):
+        i = next(i for i, (e, c) in enumerate(zip(raw["easting"], raw["crs"], strict=True))
+                 if e is None or c is None)
         raise CRSError(
-            f"cannot export without grid coordinates (point '{ids[no_grid[0]]}' has none): solve "
+            f"cannot export without grid coordinates (point '{ids[i]}' has none): solve "
             "with a projected CRS, e.g. --crs EPSG:27700")
     first = {k: raw[k][0] for k in ("point_id", "crs", "height_type", "vertical_datum")}
     for key in ("crs", "height_type", "vertical_datum"):
-        other = next((i for i, v in enumerate(raw[key]) if v != first[key]), None)
-        if other is not None:
+        if len(set(raw[key])) > 1:
+            other = next(i for i, v in enumerate(raw[key]) if v != first[key])
             raise CRSError(
                 f"points '{ids[0]}' and '{ids[other]}' differ in {key} "
                 f"({first[key]!r} vs {raw[key][other]!r}); one export holds one CRS")
-    index: dict[str, int] = {}
-    for i, pid in enumerate(ids):
-        if pid in index:
-            raise InputError(f"duplicate point id '{pid}' in the measurements")
-        index[pid] = i
+    index = dict(zip(ids, range(len(ids)), strict=True))
+    if len(index) != len(ids):
+        seen: set[str] = set()
+        dup = next(p for p in ids if p in seen or seen.add(p))
+        raise InputError(f"duplicate point id '{dup}' in the measurements")
     try:
         g = grid_crs(first["crs"])
     except CRSError as exc:
@@ -314,7 +321,7 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
 def _measurement_rays(ms: list):
     """`_rays` for many Measurement objects at once: (owners, counts, origins, px, m, out, exc)."""
     org = [m.ray_origins_grid for m in ms]
-    if all(o is not None for o in org):
+    if type(None) not in set(map(type, org)):
         have, sel = np.arange(len(ms)), ms
     else:
         have = np.array([i for i, o in enumerate(org) if o is not None], dtype=np.int64)
@@ -326,7 +333,7 @@ def _measurement_rays(ms: list):
 
     def cat(name, fill):
         vals = [getattr(m, name) for m in sel]
-        if all(v is not None for v in vals):
+        if type(None) not in set(map(type, vals)):
             return np.concatenate(vals)
         return np.concatenate([np.full(c, fill) if v is None else np.asarray(v)
                                for v, c in zip(vals, counts, strict=True)])
@@ -337,7 +344,7 @@ def _measurement_rays(ms: list):
 
 
 def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str]) -> None:
-    if all(type(m).__name__ == "Measurement" for m in solved):
+    if _all_measurements(solved):
         fast = _measurement_rays(solved)
         if fast is None:
             return
