@@ -299,3 +299,22 @@ def surface_height(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     inr = (np.abs(y - RAIL_Y) <= RAIL_RADIUS) & (x >= RAIL_POSTS_X[0]) & (x <= RAIL_POSTS_X[-1])
     z = np.where(inr, np.maximum(z, RAIL_HEIGHTS[0] + RAIL_RADIUS), z)
     return z
+
+
+def inside(points: np.ndarray) -> np.ndarray:
+    """True where points (..., 3) lie inside a solid or below the ground (z < 0)."""
+    p = np.asarray(points, np.float64)
+    out = p[..., 2] < 0
+    for s in solids():
+        if isinstance(s, ConvexSolid):
+            out |= np.all(p @ s.planes[:, :3].T <= s.planes[:, 3], axis=-1)
+        else:
+            axis = s.b - s.a
+            length = float(np.linalg.norm(axis))
+            u = axis / length
+            w = p - s.a
+            along = w @ u
+            radial = w - along[..., None] * u
+            out |= ((along >= 0) & (along <= length)
+                    & (np.einsum("...i,...i->...", radial, radial) <= s.radius**2))
+    return out
