@@ -178,20 +178,19 @@ def create_app(config: ServerConfig, store=None) -> FastAPI:
 
     app.include_router(router)
 
-    # Static files are served on the event loop: a tile of a few MiB is one read from the page
-    # cache (well under a millisecond), cheaper than a hop through the thread pool; bigger
-    # files stream from a thread (files.WHOLE_READ_LIMIT).
+    # Static files are read in the thread pool (on the event loop they serialised behind each
+    # other and halved tile throughput with 8 clients).
     @app.api_route("/scenes/{name}/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
-    async def scene_file(name: str, rel: str, request: Request) -> Response:
+    def scene_file(name: str, rel: str, request: Request) -> Response:
         return file_response(request, config.data_dir / "scenes" / name, rel, SCENE_CACHE) \
             if _safe_name(name) else _error(404, "no such scene")
 
     @app.api_route("/cesium/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
-    async def cesium_file(rel: str, request: Request) -> Response:
+    def cesium_file(rel: str, request: Request) -> Response:
         return file_response(request, Path(config.cesium_dir), rel, CESIUM_CACHE)
 
     @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
-    async def index(request: Request) -> Response:
+    def index(request: Request) -> Response:
         if (Path(config.web_dir) / "index.html").is_file():
             return file_response(request, Path(config.web_dir), "index.html", WEB_CACHE)
         return HTMLResponse(PLACEHOLDER.format(version=__version__))
@@ -201,7 +200,7 @@ def create_app(config: ServerConfig, store=None) -> FastAPI:
         return RedirectResponse("/docs")
 
     @app.api_route("/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
-    async def web_file(rel: str, request: Request) -> Response:
+    def web_file(rel: str, request: Request) -> Response:
         if rel.startswith(("api/", "node_modules/")) or rel.split("/", 1)[0].startswith("."):
             return _error(404, f"not found: /{rel}")
         return file_response(request, Path(config.web_dir), rel, WEB_CACHE)

@@ -53,8 +53,8 @@ CONTENT_TYPES = {
 }
 
 
-#: Files up to this size are read in one go; larger ones are streamed from a worker thread.
-WHOLE_READ_LIMIT = 4 * 1024 * 1024
+#: Files up to this size are read in one go; larger ones are streamed in chunks.
+WHOLE_READ_LIMIT = 16 * 1024 * 1024
 
 
 def content_type(path: Path) -> str:
