@@ -198,7 +198,7 @@ def plot(results: dict, path: Path) -> None:
     ax.set_xscale("log")
     ax.set_xlabel("POST /api/intersect latency (ms)")
     ax.set_ylabel("fraction of requests")
-    ax.set_title(f"{results['clients']} concurrent clients on loopback, {results['workers']} "
+    ax.set_title(f"POST /api/intersect on loopback, {results['workers']} "
                  f"worker(s); load average {results['loadavg_start']:.1f} on {results['cpus']} CPUs",
                  fontsize=10)
     ax.legend(fontsize=8)
