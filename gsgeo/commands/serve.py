@@ -24,7 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default 127.0.0.1; any other address requires a "
                         "token: GSGEO_TOKEN or one generated and printed at start)")
-    p.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free)")
+    p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     p.add_argument("--web", default=None, metavar="DIR",
                    help="web client directory (default: the repository's web/)")
     p.add_argument("--workers", type=int, default=1,
