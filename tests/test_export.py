@@ -514,3 +514,22 @@ def test_cli_legacy_geojson_and_errors(tmp_path, rng, capsys):
     assert main(["solve", str(empty), "--crs", "EPSG:27700", "-o", str(tmp_path / "x.gpkg")]) == 2
     assert "no points" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.json", "grid.json", "session.json"]
+
+
+def test_text_fields_with_unicode_commas_quotes_and_newlines(tmp_path, rng):
+    from export_helpers import session_doc
+
+    from gsgeo.session import parse_session
+
+    doc = session_doc(rng, lines=[], polygons=[])
+    doc["points"][0]["id"] = "Pünkt 1"
+    doc["points"][0]["description"] = 'gable, "north"\nsecond line; 角'
+    res = measure_session(parse_session(doc), crs="EPSG:27700")
+    want = doc["points"][0]["description"]
+    rows = list(csv.DictReader(write_measurements(tmp_path / "t.csv", res).open(encoding="utf-8",
+                                                                               newline="")))
+    assert rows[0]["point_id"] == "Pünkt 1" and rows[0]["description"] == want
+    gj = json.loads(write_measurements(tmp_path / "t.geojson", res).read_text(encoding="utf-8"))
+    assert gj["features"][0]["id"] == "Pünkt 1" and gj["features"][0]["properties"]["description"] == want
+    df = pyogrio.read_dataframe(write_measurements(tmp_path / "t.gpkg", res), layer="points")
+    assert df.point_id[0] == "Pünkt 1" and df.description[0] == want
