@@ -182,6 +182,10 @@ def test_create_project_and_measure_known_point(server, browser):
         p.page.fill("#pf-name", "Roof survey")
         p.page.fill("#pf-crs-q", "UTM zone 30N")
         p.page.click(f"#pf-crs-results li[data-code='{GRID}']")
+        # the vertical datum is searched among vertical CRSs (left empty: ellipsoidal heights)
+        p.page.fill("#pf-vertical", "ODN height")
+        p.page.wait_for_selector("#pf-vertical-results li[data-code='EPSG:5701']")
+        p.page.fill("#pf-vertical", "")
         p.page.fill("#pf-sigma", "0.8")
         p.page.click("#pf-submit")
         p.page.wait_for_function("document.querySelector('#project-dialog').hidden"
@@ -314,6 +318,43 @@ def test_backspace_and_escape(server, browser, project):
         p.shot("06_help", settle_ms=500)
         p.page.keyboard.press("Escape")
         p.page.wait_for_selector("#help", state="hidden")
+        assert p.errors == []
+    finally:
+        p.close()
+
+
+def test_bad_click_is_flagged_red(server, browser, project):
+    """Four exact clicks and one 25 px off: the bad ray gets a large residual in pixels and is
+    flagged (red row); excluding it brings the solution back onto the marker."""
+    p = Page(browser, f"{server}/?project={project}")
+    try:
+        known = _known("roof_c")
+        views = [*VIEWPOINTS, (80.0, 40.0, 9.0, (0.2, 0.2, 0.0))]
+        p.page.keyboard.press("m")
+        for i, view in enumerate(views):
+            if i < 4:
+                p.click_world(known, view)
+            else:
+                aim = p.page.evaluate(AIM_JS, [list(map(float, known)), *view[:3], list(view[3])])
+                p.page.mouse.click(aim["x"] + 25.0, aim["y"])
+            p.wait_rays(i + 1)
+        p.page.wait_for_function(
+            "() => document.querySelectorAll('#ray-table tbody tr.outlier').length === 1", timeout=30_000)
+        rows = p.page.locator("#ray-table tbody tr")
+        assert "outlier" in (rows.nth(4).get_attribute("class") or "")
+        res = [float(t) for t in p.page.locator("#ray-table tbody tr td:nth-child(2)").all_inner_texts()]
+        assert res[4] > 10.0 and max(res[:4]) < res[4] / 2, res  # the good rays absorb some
+        p.shot("09_outlier_flagged", settle_ms=500)
+        sol = p.page.evaluate("gsgeo.state.measure.solution.point_ecef")
+        assert np.linalg.norm(np.array(sol) - known) > 0.002  # the bad ray pulls the point
+        rows.nth(4).locator("button").click()  # exclude it
+        p.page.wait_for_function("() => document.querySelector('#ray-table tbody tr.excluded')")
+        p.wait_solution()
+        p.page.wait_for_function(
+            "() => gsgeo.state.measure.solution && gsgeo.state.measure.solution.n_rays === 4")
+        sol = p.page.evaluate("gsgeo.state.measure.solution.point_ecef")
+        assert np.linalg.norm(np.array(sol) - known) < 0.005
+        p.page.keyboard.press("Escape")
         assert p.errors == []
     finally:
         p.close()

@@ -266,6 +266,7 @@ function openProjectDialog(mode) {
   $("#pf-crs-q").value = "";
   $("#pf-crs-results").replaceChildren();
   $("#pf-vertical").value = p && p.vertical ? p.vertical : "";
+  $("#pf-vertical-results").replaceChildren();
   $("#pf-geoid").value = p && p.geoid ? p.geoid : "";
   $("#pf-source").value = p ? p.source_crs : "EPSG:4978";
   $("#pf-sigma").value = p ? p.sigma_px : 1.0;
@@ -290,6 +291,25 @@ async function searchCrs() {
       },
     }, `${r.code} — ${r.name}${r.kind === "compound" ? " (compound)" : ""}`))
       : [h("li", {}, `nothing matches '${q}'`)]));
+  } catch (exc) {
+    list.replaceChildren(h("li", { class: "error" }, exc.message));
+  }
+}
+
+let verticalTimer = null;
+
+async function searchVertical() {
+  const input = $("#pf-vertical");
+  const q = input.value.trim();
+  const list = $("#pf-vertical-results");
+  if (!q || /^[A-Za-z]+:\d+$/.test(q)) { list.replaceChildren(); return; }
+  try {
+    const data = await api("GET", `/crs?q=${encodeURIComponent(q)}&kind=vertical&limit=20`);
+    if (input.value.trim() !== q) return;
+    list.replaceChildren(...data.results.map((r) => h("li", {
+      "data-code": r.code, title: r.area || "",
+      onclick: () => { input.value = r.code; list.replaceChildren(); },
+    }, `${r.code} — ${r.name}`)));
   } catch (exc) {
     list.replaceChildren(h("li", { class: "error" }, exc.message));
   }
@@ -340,6 +360,7 @@ function startMeasure(editPoint = null) {
     solution: null, error: null, seq: 0,
   };
   $("#pt-id").value = state.measure.pointId;
+  $("#pt-id").dataset.auto = "1"; // the server picks the next free id unless the user types one
   $("#pt-id").disabled = Boolean(editPoint);
   $("#pt-code").value = editPoint ? editPoint.code : "";
   $("#pt-desc").value = editPoint ? editPoint.description : "";
@@ -416,12 +437,12 @@ async function finishMeasure() {
     let pt;
     if (m.editing) {
       const url = `/projects/${pid}/points/${encodeURIComponent(m.editing)}`;
-      pt = await api("PATCH", url, { rays: m.rays, code, description });
-      if (excluded.length) pt = await api("PATCH", url, { excluded });
+      pt = await api("PATCH", url, { rays: m.rays, excluded, code, description });
     } else {
-      const id = $("#pt-id").value.trim() || undefined;
+      const id = ($("#pt-id").dataset.auto !== "1" && $("#pt-id").value.trim()) || undefined;
       pt = await api("POST", `/projects/${pid}/points`, { id, code, description, rays: m.rays, excluded });
     }
+    state.points = [...state.points.filter((q) => q.id !== pt.id), pt];
     endMeasure();
     await refreshProjectData();
     selectPoint(pt.id, false);
@@ -976,8 +997,10 @@ function wire() {
   $("#btn-settings").addEventListener("click", () => openProjectDialog("edit"));
   $("#pf-cancel").addEventListener("click", () => { $("#project-dialog").hidden = true; });
   $("#project-form").addEventListener("submit", submitProject);
+  $("#pt-id").addEventListener("input", () => { $("#pt-id").dataset.auto = "0"; });
   $("#pf-crs-q").addEventListener("input", () => { clearTimeout(crsTimer); crsTimer = setTimeout(searchCrs, 250); });
   $("#pf-crs-q").addEventListener("keydown", (ev) => { if (ev.key === "Enter") { ev.preventDefault(); searchCrs(); } });
+  $("#pf-vertical").addEventListener("input", () => { clearTimeout(verticalTimer); verticalTimer = setTimeout(searchVertical, 250); });
   $("#scene-select").addEventListener("change", (ev) => loadScene(ev.target.value).catch(fail));
   $("#project-select").addEventListener("change", (ev) => openProject(ev.target.value).catch(fail));
   document.querySelectorAll("input[name=conf]").forEach((r) => r.addEventListener("change", () => setConf(r.value)));

@@ -1,12 +1,13 @@
 // One aim = one ray (DESIGN.md "Session JSON"): the camera centre and the direction through the
 // clicked pixel in rendered ECEF, the angular size of that pixel, and the tileset's modelMatrix.
 
-const Cesium = window.Cesium;
+const Cesium = globalThis.Cesium;
 
 /** The angular size (radians) of one CSS pixel at window position (x, y) of a pinhole camera
- *  with vertical field of view `fovy` on a canvas `height` CSS pixels high: the geometric mean
- *  of its radial (f / (f² + r²)) and tangential (1 / sqrt(f² + r²)) extents, f the focal
- *  length in pixels and r the distance from the image centre. */
+ *  with vertical field of view `fovy` on a canvas `height` CSS pixels high: the square root of
+ *  the pixel's solid angle f / (f² + r²)^(3/2), i.e. the geometric mean of its radial
+ *  (f / (f² + r²)) and tangential (1 / sqrt(f² + r²)) extents; f is the focal length in pixels
+ *  and r the distance from the image centre. At the centre it is 2 tan(fovy / 2) / height. */
 export function pixelAngle(fovy, width, height, x, y) {
   const f = height / (2 * Math.tan(fovy / 2));
   const r2 = (x - width / 2) ** 2 + (y - height / 2) ** 2;
