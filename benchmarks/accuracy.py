@@ -151,7 +151,7 @@ def build_dsm(smooth_m: float, cell: float = DSM_CELL):
     """A rasterio dataset (in memory, GeoTIFF, EPSG:27700 at the demo place) of the scene's 2.5-D
     top surface: area mean of 3 x 3 samples per cell, Gaussian-smoothed by smooth_m metres."""
     from rasterio.io import MemoryFile
-    from rasterio.transform import from_origin
+    from rasterio.transform import Affine
 
     half = scene.GROUND_HALF
     n = int(round(2 * half / cell))
@@ -163,7 +163,7 @@ def build_dsm(smooth_m: float, cell: float = DSM_CELL):
     if smooth_m > 0:
         s = smooth_m / cell
         z = _gaussian_1d(_gaussian_1d(z, s, 0), s, 1)
-    transform = from_origin(DSM_ORIGIN_EN[0] - half, DSM_ORIGIN_EN[1] + half, cell, cell)
+    transform = Affine(cell, 0.0, DSM_ORIGIN_EN[0] - half, 0.0, -cell, DSM_ORIGIN_EN[1] + half)
     mem = MemoryFile()
     with mem.open(driver="GTiff", width=n, height=n, count=1, dtype="float32", crs=DSM_CRS,
                   transform=transform, nodata=np.nan) as ds:
@@ -181,8 +181,10 @@ class DsmSampler:
         self.zmin = float(np.nanmin(self.z))
 
     def __call__(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        col, row = self.inv * (x + DSM_ORIGIN_EN[0], y + DSM_ORIGIN_EN[1])
-        col, row = np.asarray(col) - 0.5, np.asarray(row) - 0.5   # pixel centres
+        e, n = x + DSM_ORIGIN_EN[0], y + DSM_ORIGIN_EN[1]
+        t = self.inv
+        col = t.a * e + t.b * n + t.c - 0.5        # pixel centres
+        row = t.d * e + t.e * n + t.f - 0.5
         h, w = self.z.shape
         c0, r0 = np.floor(col).astype(int), np.floor(row).astype(int)
         inside = (c0 >= 0) & (r0 >= 0) & (c0 < w - 1) & (r0 < h - 1)
