@@ -113,3 +113,15 @@ def test_bad_arguments_get_a_message(tmp_path):
     assert r.returncode == 2 and "is not a directory" in r.stderr and "Traceback" not in r.stderr
     r = _gsgeo("demo", "--data", str(tmp_path / "d"), "--port", "70000")
     assert r.returncode == 2 and "--port" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_busy_port_is_reported_before_building(tmp_path):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        r = _gsgeo("demo", "--data", str(tmp_path / "d"), "--port", str(port))
+    assert r.returncode == 2 and "in use" in r.stderr and "--port" in r.stderr
+    assert not (tmp_path / "d").exists()   # nothing built

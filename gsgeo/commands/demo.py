@@ -30,12 +30,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+def _check_port_free(host: str, port: int) -> None:
+    """Fail before the build, with a message, when the port is taken (port 0: any free one)."""
+    import socket
+
+    if port == 0:
+        return
+    try:
+        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+            s.bind((host, port))
+    except OSError as exc:
+        raise InputError(f"cannot serve on {host}:{port} ({exc.strerror}); another server "
+                         "may be running there: pass --port N, or --no-serve") from None
+
+
 def run(args: argparse.Namespace) -> int:
     from gsgeo.demo.build import build_demo
     from gsgeo.demo.project import PROJECT_ID, ensure_project
 
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port must be between 0 and 65535, got {args.port}")
+    if not args.no_serve:
+        _check_port_free(args.host, args.port)
     data = Path(args.data)
     build = build_demo(data, force=args.rebuild)
     if not build.built:
