@@ -219,15 +219,23 @@ def ellipse_rings(e, n, major, minor, bearing_deg, unit_m: float = 1.0,
     Semi-axes in metres (divided by unit_m for the CRS's units), bearing of the major axis in
     degrees clockwise from grid north.
     """
-    b = np.radians(np.asarray(bearing_deg, dtype=np.float64))[:, None]
-    t = np.linspace(0.0, 2 * np.pi, vertices, endpoint=False)[None, :]
-    a_ = np.asarray(major)[:, None] / unit_m * np.cos(t)
-    b_ = np.asarray(minor)[:, None] / unit_m * np.sin(t)
-    # Major axis u = (sin b, cos b); v = (-cos b, sin b) makes (u, v) counterclockwise.
-    x = np.asarray(e)[:, None] + a_ * np.sin(b) - b_ * np.cos(b)
-    y = np.asarray(n)[:, None] + a_ * np.cos(b) + b_ * np.sin(b)
-    ring = np.stack([x, y], axis=-1)
-    return np.concatenate([ring, ring[:, :1]], axis=1)
+    b = np.radians(np.asarray(bearing_deg, dtype=np.float64))
+    t = np.linspace(0.0, 2 * np.pi, vertices, endpoint=False)
+    ct, st = np.cos(t)[None, :], np.sin(t)[None, :]
+    a_ = np.asarray(major, dtype=np.float64) / unit_m
+    b_ = np.asarray(minor, dtype=np.float64) / unit_m
+    # Major axis u = (sin b, cos b); v = (-cos b, sin b) makes (u, v) counterclockwise:
+    # p(t) = c + a cos t u + b sin t v. Written into one array (few large temporaries).
+    ring = np.empty((b.shape[0], vertices + 1, 2))
+    x, y = ring[:, :vertices, 0], ring[:, :vertices, 1]
+    np.multiply((a_ * np.sin(b))[:, None], ct, out=x)
+    x -= (b_ * np.cos(b))[:, None] * st
+    x += np.asarray(e, dtype=np.float64)[:, None]
+    np.multiply((a_ * np.cos(b))[:, None], ct, out=y)
+    y += (b_ * np.sin(b))[:, None] * st
+    y += np.asarray(n, dtype=np.float64)[:, None]
+    ring[:, vertices] = ring[:, 0]
+    return ring
 
 
 def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
