@@ -100,6 +100,21 @@ def test_lod_bounds_and_parents_hold_the_most_prominent(built):
     assert np.median(prominence(root)) > np.percentile(rest, 90)
 
 
+def test_parent_subset_of_tied_splats_covers_the_scene():
+    """Equal prominence (common after byte quantisation) must not keep a strip of the file."""
+    n = 40_000
+    rng = np.random.default_rng(3)
+    pos = np.c_[np.linspace(0.0, 100.0, n), rng.uniform(0, 100, n), np.zeros(n)]  # x in file order
+    root = lod.build_tree(pos, np.full(n, 0.01), np.ones(n, dtype=np.float32), max_splats=10_000)
+    counts, _ = np.histogram(pos[root.index, 0], bins=10, range=(0, 100))
+    assert counts.min() > 0.8 * counts.mean()
+
+
+def test_output_directory_has_ordinary_permissions(built):
+    _, out = built
+    assert out.stat().st_mode & 0o755 == 0o755
+
+
 def test_tree_with_identical_positions_terminates():
     pos = np.zeros((5000, 3))
     root = lod.build_tree(pos, np.zeros(5000), np.ones(5000), max_splats=1000)

@@ -160,6 +160,11 @@ def _prepare_outdir(outdir: Path, overwrite: bool) -> Path:
 
 def _commit(tmp: Path, outdir: Path) -> None:
     """Swap the finished temporary directory into place; an old OUTDIR is removed only after."""
+    # mkdtemp makes the directory 0700; a tileset is served and shared like any output
+    # directory, so give it the mode a plain mkdir would (0777 less the umask).
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)
     old = None
     if outdir.exists():
         old = Path(tempfile.mkdtemp(prefix=f".{outdir.name}.", suffix=".old", dir=outdir.parent))

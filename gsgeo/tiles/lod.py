@@ -78,6 +78,18 @@ def _split(pos_t: np.ndarray, radius: np.ndarray, idx: np.ndarray):
     return out
 
 
+def _tie_breaker(idx: np.ndarray) -> np.ndarray:
+    """Factors in [1, 1 + 1e-4) from a hash of the splat index.
+
+    Prominence comes from quantised bytes, so many splats tie; without this the parent would
+    keep the tied splats in file order, i.e. a strip of the scene. The factor is far below
+    one quantisation step (about 4 % in area), so it only reorders ties, and it is
+    deterministic.
+    """
+    h = (idx.astype(np.uint64) * np.uint64(2654435761)) & np.uint64(0xFFFFFFFF)
+    return 1.0 + h.astype(np.float32) * np.float32(1e-4 / 2**32)
+
+
 def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
                max_splats: int = 131_072, parent_splats: int | None = None) -> Node:
     """Build the tile tree over splat centres ``pos`` (N, 3) with box radii ``radius`` (N,).
@@ -104,7 +116,7 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
         idx = node.index
         if idx.shape[0] <= max_splats:
             continue
-        order = np.argpartition(-prominence[idx], parent_splats - 1)
+        order = np.argpartition(-(prominence[idx] * _tie_breaker(idx)), parent_splats - 1)
         # argpartition scrambles the order; sorted indices keep gathers near-sequential
         node.index, rest = idx[order[:parent_splats]], np.sort(idx[order[parent_splats:]])
         for i, (part, clo, chi) in enumerate(_split(pos_t, radius, rest)):
