@@ -35,6 +35,7 @@ from pyproj.exceptions import ProjError
 
 from gsgeo.crs import frames as _frames
 from gsgeo.crs.frames import ecef_to_geodetic, geodetic_to_ecef
+from gsgeo.crs.transformers import accuracy_m, choose
 from gsgeo.errors import CRSError, DatumError, InputError
 from gsgeo.tiles.splats import Splats, matrix_to_quat, quat_multiply, rotation_angle, sh_rotation
 
@@ -290,8 +291,13 @@ class _GridPlacement(Placement):
         self.geog = self.horiz.geodetic_crs
         try:
             self.inv = pyproj.Transformer.from_crs(self.horiz, self.geog, always_xy=True)
-            self.to_ecef_t = pyproj.Transformer.from_crs(self.geog.to_3d(), "EPSG:4978",
-                                                         always_xy=True)
+            # The same explicit operation the measurements take back to the grid
+            # (gsgeo.crs.transformers.choose at the scene centre), so a point measured in the
+            # tileset returns to the input's own grid coordinates.
+            lon_c, lat_c = self.inv.transform(c_in[0] + georef.offset[0],
+                                              c_in[1] + georef.offset[1], errcheck=False)
+            self.to_ecef_t, _ = choose(self.geog.to_3d().to_wkt(), "EPSG:4978",
+                                       float(lon_c), float(lat_c))
             self.proj = pyproj.Proj(self.horiz)
         except (ProjError, PyprojCRSError) as exc:
             raise CRSError(f"cannot build the transformation from {georef.crs}: {exc}") from None
@@ -329,12 +335,12 @@ class _GridPlacement(Placement):
         centre = self._ecef(c_in[None])[0][0]
         super().__init__(georef, centre)
         self.operation = georef.describe() + "; " + self.to_ecef_t.description
-        acc = self.to_ecef_t.accuracy
-        self.operation_accuracy_m = None if acc is None or acc < 0 else float(acc)
-        if self.operation_accuracy_m is None or self.operation_accuracy_m > 0:
+        acc = accuracy_m(self.to_ecef_t)
+        self.operation_accuracy_m = acc
+        if acc is None or acc > 0:
             georef.warnings.append(
                 f"{self.geog.name} -> WGS 84 goes through '{self.to_ecef_t.description}' "
-                f"(accuracy {'unknown' if self.operation_accuracy_m is None else f'{acc} m'})")
+                f"(accuracy {'unknown' if acc is None else f'{acc:g} m'})")
         self.ax = AXES[georef.axes]
 
     def _ecef(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
