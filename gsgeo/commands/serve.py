@@ -20,7 +20,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                     "are kept in DATA/gsgeo.sqlite.",
     )
     p.add_argument("--data", default="gsgeo-data", metavar="DIR",
-                   help="data directory with scenes/ and the project store (default: ./gsgeo-data, as gsgeo demo)")
+                   help="data directory with scenes/ and the project store "
+                        "(default: ./gsgeo-data, as for gsgeo demo)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default 127.0.0.1; any other address requires a "
                         "token: GSGEO_TOKEN or one generated and printed at start)")
