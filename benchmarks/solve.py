@@ -69,12 +69,14 @@ def main() -> int:
     t_unw = best_of(lambda: intersect_batch(o, d), args.repeat)
     rows.append(("intersect_batch, unweighted", f"{m / t_unw:,.0f} points/s", f"{t_unw:.3f} s for {m:,}"))
     t_ang = best_of(lambda: intersect_batch(o, d, ifov=ifov), args.repeat)
-    rows.append(("intersect_batch, angular (iterated)", f"{m / t_ang:,.0f} points/s", f"{t_ang:.3f} s for {m:,}"))
+    rows.append(("intersect_batch, angular (iterated)", f"{m / t_ang:,.0f} points/s",
+                 f"{t_ang:.3f} s for {m:,}"))
 
     k = args.loop_points
     t_loop = best_of(lambda: per_point_loop(o[:k], d[:k]), 1)
     loop_rate = k / t_loop
-    rows.append(("per-point numpy loop, unweighted", f"{loop_rate:,.0f} points/s", f"{t_loop:.3f} s for {k:,}"))
+    rows.append(("per-point numpy loop, unweighted", f"{loop_rate:,.0f} points/s",
+                 f"{t_loop:.3f} s for {k:,}"))
     rows.append(("batch / loop (unweighted)", f"{(m / t_unw) / loop_rate:.0f} x", ""))
 
     lat = []
