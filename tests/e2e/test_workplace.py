@@ -199,6 +199,9 @@ def test_create_project_and_measure_known_point(server, browser):
         p.page.wait_for_selector("#pf-vertical-results li[data-code='EPSG:5701']")
         p.page.fill("#pf-vertical", "")
         p.page.fill("#pf-sigma", "0.8")
+        p.page.fill("#pf-crs-q", "UTM zone 30N")  # the results list stays for the screenshot
+        p.page.wait_for_selector(f"#pf-crs-results li[data-code='{GRID}']")
+        p.shot("00_new_project_dialog", settle_ms=300)
         p.page.click("#pf-submit")
         p.page.wait_for_function("document.querySelector('#project-dialog').hidden"
                                  " || document.querySelector('#pf-error').textContent")
