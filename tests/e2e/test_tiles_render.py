@@ -71,9 +71,12 @@ def test_real_scene_rebuilt_renders(tmp_path, white_sculpture):
     img_n, info, errors = render(site, "ours/tileset.json", ARTIFACTS / "tiles_real_gsgeo.png",
                                  camera_url="orig/tileset.json")
     lit_o, lit_n = _lit(img_o), _lit(img_n)
-    assert lit_o.sum() > 20_000
+    # The original's own tile tree does not always come out whole in SwiftShader under this
+    # camera (seen: its ground tiles missing in some runs), so it is the reference for where
+    # splats are, not for how many: ours must render as splats and cover what it shows.
+    assert lit_o.sum() > 5_000
+    assert lit_n.sum() > 20_000, (lit_n.sum(), info, errors)
     assert lit_n.sum() > 0.8 * lit_o.sum(), (lit_n.sum(), lit_o.sum(), info, errors)
-    # the same splats in the same place under the same camera: the lit areas coincide
-    iou = (lit_o & lit_n).sum() / (lit_o | lit_n).sum()
-    assert iou > 0.7, iou
+    covered = (lit_o & lit_n).sum() / lit_o.sum()
+    assert covered > 0.7, covered
     assert rebuilt.splats_written == 690_573

@@ -120,13 +120,19 @@ def render(site: Path, tileset_url: str, png: Path, *, size=(800, 600),
                 raise RuntimeError(f"Cesium could not load the tileset: {err}")
             png.parent.mkdir(parents=True, exist_ok=True)
             # splats are sorted by a web worker after loading: wait until the picture settles
+            # (SwiftShader can take seconds a frame: two equal screenshots alone may be one
+            # frame still being drawn, so the tileset must also report every tile loaded and
+            # the splat primitive stable, three times in a row)
             t_end = time.monotonic() + timeout_s
-            last = -1
+            last, calm = -1, 0
             while True:
                 page.wait_for_timeout(settle_ms)
+                ready = page.evaluate(
+                    "window.splatsStable() && window.state.tileset.tilesLoaded")
                 page.screenshot(path=str(png), timeout=180_000)
                 lit = int((_read_png(png).max(axis=2) > 24).sum())
-                if (last > 0 and abs(lit - last) <= 0.01 * last) or time.monotonic() > t_end:
+                calm = calm + 1 if ready and last > 0 and abs(lit - last) <= 0.01 * last else 0
+                if calm >= 2 or time.monotonic() > t_end:
                     break
                 last = lit
             info = page.evaluate("""() => { const t = window.state.tileset;
