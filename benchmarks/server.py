@@ -38,6 +38,8 @@ from pathlib import Path
 import httpx
 import numpy as np
 
+from gsgeo.crs.transformers import transformer
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED_SCENE = REPO.parent / "shared" / "data" / "white-sculpture"
 
@@ -63,9 +65,7 @@ def wait_up(url: str, proc: subprocess.Popen, timeout: float = 60) -> None:
 
 def point_rays(rng: np.random.Generator, n: int = 5) -> list[dict]:
     """n rays at a random point near London, 1 px aiming noise, ifov 1 mrad."""
-    import pyproj
-
-    t = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
+    t = transformer("EPSG:4979", "EPSG:4978")  # cached: not one Transformer per point
     lon, lat = -0.1276 + rng.uniform(-1e-3, 1e-3), 51.5072 + rng.uniform(-1e-3, 1e-3)
     x = np.array(t.transform(lon, lat, 50.0))
     up = x / np.linalg.norm(x)

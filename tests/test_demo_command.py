@@ -12,6 +12,7 @@ import sys
 
 import numpy as np
 import pytest
+from servertools import rays_at
 
 from gsgeo.demo import place, scene
 from gsgeo.store import Projects, open_store
@@ -50,31 +51,16 @@ def test_demo_builds_scene_and_project(data):
         store.close()
 
 
-def _rays_at(target: np.ndarray, n: int = 4) -> list[dict]:
-    """Exact rays from n cameras 30 m away and 25 m up (in the local up of the target)."""
-    up = target / np.linalg.norm(target)
-    east = np.cross([0.0, 0.0, 1.0], up)
-    east /= np.linalg.norm(east)
-    north = np.cross(up, east)
-    rays = []
-    for k in range(n):
-        a = 2 * np.pi * k / n
-        o = target + 30 * (np.cos(a) * east + np.sin(a) * north) + 25 * up
-        d = (target - o) / np.linalg.norm(target - o)
-        rays.append({"origin": o.tolist(), "direction": d.tolist()})
-    return rays
-
-
 def test_a_point_measured_on_a_marker_matches_its_truth(data):
     truth = {t.id: np.array(t.ecef) for t in place.truth_points()}
     store = open_store(data)
     try:
         projects = Projects(store, data)
-        projects.add_point("demo", {"id": "T2", "rays": _rays_at(truth["T2"])})
+        projects.add_point("demo", {"id": "T2", "rays": rays_at(truth["T2"])})
         # a point off the truth by 5 cm east-ish: the report must show it
         off = truth["S1"] + 0.05 * np.cross([0.0, 0.0, 1.0], truth["S1"]) / np.linalg.norm(
             np.cross([0.0, 0.0, 1.0], truth["S1"]))
-        projects.add_point("demo", {"id": "S1", "rays": _rays_at(off)})
+        projects.add_point("demo", {"id": "S1", "rays": rays_at(off)})
         rep = projects.accuracy("demo")
     finally:
         store.close()
@@ -89,7 +75,7 @@ def test_rerun_reuses_the_scene_and_keeps_measurements(data):
     store = open_store(data)
     try:
         g1 = next(np.array(t.ecef) for t in place.truth_points() if t.id == "G1")
-        Projects(store, data).add_point("demo", {"id": "G1", "rays": _rays_at(g1)})
+        Projects(store, data).add_point("demo", {"id": "G1", "rays": rays_at(g1)})
     finally:
         store.close()
     r = _gsgeo("demo", "--data", str(data), "--no-serve")
