@@ -23,7 +23,10 @@ lower bound for a dedicated server.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
+import math
+import multiprocessing as mp
 import os
 import random
 import shutil
@@ -100,44 +103,109 @@ def cpu_seconds(pid: int) -> float:
     return total
 
 
-def latency_run(base: str, clients: int, requests: int, think: float, seed: int) -> dict:
-    rng = np.random.default_rng(seed)
-    bodies = [{"rays": point_rays(rng), "crs": "EPSG:27700", "sigma_px": 1.0}
-              for _ in range(64)]
+async def _read_response(reader: asyncio.StreamReader) -> tuple[int, bytes]:
+    """One HTTP/1.1 response (status line, headers, Content-Length body) from a keep-alive stream."""
+    head = await reader.readuntil(b"\r\n\r\n")
+    lines = head.split(b"\r\n")
+    status = int(lines[0].split(b" ", 2)[1])
+    length = 0
+    for line in lines[1:]:
+        name, _, value = line.partition(b":")
+        if name.strip().lower() == b"content-length":
+            length = int(value)
+    return status, await reader.readexactly(length)
+
+
+async def _clients(port: int, requests: list[bytes], ids: list[int], n: int, think: float,
+                   seed: int, start_at: float) -> tuple[list[float], int, float, float]:
+    """The clients ``ids`` of one process: each a keep-alive connection sending ``n`` requests.
+
+    Latency is from writing the request to having read the whole response (client-side,
+    think time excluded). Returns (latencies s, errors, first send, last answer).
+    """
     lat: list[float] = []
     errors = 0
-    lock = threading.Lock()
-    barrier = threading.Barrier(clients)
+    first, last = math.inf, 0.0
 
-    def client(c: int) -> None:
-        nonlocal errors
+    async def client(c: int) -> None:
+        nonlocal errors, first, last
         r = random.Random(seed * 1000 + c)
-        local, bad = [], 0
-        with httpx.Client(base_url=base, timeout=60) as h:
-            h.post("/api/intersect", json=bodies[0])  # connect and warm up
-            barrier.wait()
-            for i in range(requests):
-                if think > 0:
-                    time.sleep(r.expovariate(1.0 / think))
-                t0 = time.perf_counter()
-                resp = h.post("/api/intersect", json=bodies[(c + i) % len(bodies)])
-                local.append(time.perf_counter() - t0)
-                bad += resp.status_code != 200
-        with lock:
-            lat.extend(local)
-            errors += bad
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        writer.write(requests[c % len(requests)])  # connect and warm up
+        status, body = await _read_response(reader)
+        doc = json.loads(body)
+        if status != 200 or not isinstance(doc.get("easting"), float):
+            raise RuntimeError(f"bad warm-up answer {status}: {body[:200]!r}")
+        await asyncio.sleep(max(0.0, start_at - time.perf_counter()))
+        for i in range(n):
+            if think > 0:
+                await asyncio.sleep(r.expovariate(1.0 / think))
+            t0 = time.perf_counter()
+            writer.write(requests[(c + i) % len(requests)])
+            status, _ = await _read_response(reader)
+            t1 = time.perf_counter()
+            lat.append(t1 - t0)
+            errors += status != 200
+            first, last = min(first, t0), max(last, t1)
+        writer.close()
 
-    threads = [threading.Thread(target=client, args=(c,)) for c in range(clients)]
-    t0 = time.perf_counter()
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    wall = time.perf_counter() - t0
-    a = np.array(lat) * 1000
-    return {"requests": int(a.size), "errors": errors, "p50_ms": float(np.percentile(a, 50)),
-            "p90_ms": float(np.percentile(a, 90)), "p99_ms": float(np.percentile(a, 99)),
-            "max_ms": float(a.max()), "req_per_s": a.size / wall, "latencies_ms": a.tolist()}
+    await asyncio.gather(*(client(c) for c in ids))
+    return lat, errors, first, last
+
+
+def _client_process(conn, port: int, requests: list[bytes], ids: list[int], n: int,
+                    think: float, seed: int, start_at: float) -> None:
+    try:
+        import uvloop
+
+        uvloop.install()
+    except ImportError:
+        pass
+    cpu0 = time.process_time()
+    try:
+        out = asyncio.run(_clients(port, requests, ids, n, think, seed, start_at))
+        conn.send(("ok", *out, time.process_time() - cpu0))
+    except Exception as exc:  # noqa: BLE001 - reported by the parent
+        conn.send(("error", repr(exc)))
+    conn.close()
+
+
+def latency_run(port: int, clients: int, requests: int, think: float, seed: int,
+                procs: int) -> dict:
+    """``clients`` keep-alive connections spread over ``procs`` client processes (asyncio)."""
+    rng = np.random.default_rng(seed)
+    reqs = []
+    for _ in range(64):
+        body = json.dumps({"rays": point_rays(rng), "crs": "EPSG:27700",
+                           "sigma_px": 1.0}).encode()
+        reqs.append(b"POST /api/intersect HTTP/1.1\r\nHost: 127.0.0.1:%d\r\n"
+                    b"Content-Type: application/json\r\nContent-Length: %d\r\n\r\n"
+                    % (port, len(body)) + body)
+    procs = max(1, min(procs, clients))
+    ctx = mp.get_context("fork")
+    start_at = time.perf_counter() + 1.0 + 0.02 * clients  # all connected and warm by then
+    pipes, workers = [], []
+    for p in range(procs):
+        parent, child = ctx.Pipe(duplex=False)
+        w = ctx.Process(target=_client_process, args=(
+            child, port, reqs, list(range(p, clients, procs)), requests, think, seed, start_at))
+        w.start()
+        pipes.append(parent)
+        workers.append(w)
+    parts = [p.recv() for p in pipes]
+    for w in workers:
+        w.join()
+    bad = [p[1] for p in parts if p[0] != "ok"]
+    if bad:
+        raise RuntimeError(f"client process failed: {bad[0]}")
+    a = np.array([x for p in parts for x in p[1]]) * 1000
+    wall = max(p[4] for p in parts) - min(p[3] for p in parts)
+    return {"requests": int(a.size), "errors": sum(p[2] for p in parts),
+            "p50_ms": float(np.percentile(a, 50)), "p90_ms": float(np.percentile(a, 90)),
+            "p99_ms": float(np.percentile(a, 99)), "max_ms": float(a.max()),
+            "req_per_s": a.size / wall, "client_procs": procs,
+            "client_cpu_ms_per_request": sum(p[5] for p in parts) * 1000 / a.size,
+            "latencies_ms": a.tolist()}
 
 
 def throughput_run(urls: list[str], seconds: float, clients: int = 8) -> dict:
@@ -215,6 +283,10 @@ def main() -> int:
                     help="mean think time between an operator's requests, s")
     ap.add_argument("--seconds", type=float, default=10.0, help="tile throughput duration")
     ap.add_argument("--workers", type=int, default=1, help="gsgeo serve --workers")
+    ap.add_argument("--client-procs", type=int, default=2,
+                    help="client processes the intersect clients are spread over")
+    ap.add_argument("--loads", nargs="+", default=["one", "operators", "saturation"],
+                    choices=["one", "operators", "saturation"], help="which intersect loads to run")
     ap.add_argument("--plot", default=str(REPO / "benchmarks" / "server_latency.png"))
     ap.add_argument("--json", default=None, help="write the figures here")
     args = ap.parse_args()
@@ -247,20 +319,27 @@ def main() -> int:
         runs = (("one client", 1, 200, 0.0), ("operators", args.clients, args.requests, args.think),
                 ("saturation", args.clients, args.requests, 0.0))
         for name, clients, requests, think in runs:
+            if name.split()[0] not in args.loads:
+                continue
             print(f"intersect, {name}: {clients} clients x {requests} requests...",
                   file=sys.stderr)
             cpu0 = cpu_seconds(gs.pid)
-            r = latency_run(base, clients, requests, think, seed=1)
-            r["server_cpu_ms_per_request"] = (cpu_seconds(gs.pid) - cpu0) * 1000 / r["requests"]
+            r = latency_run(port, clients, requests, think, seed=1, procs=args.client_procs)
+            # each client's warm-up request counts towards the server's CPU too
+            r["server_cpu_ms_per_request"] = ((cpu_seconds(gs.pid) - cpu0) * 1000
+                                              / (r["requests"] + clients))
             results["intersect"][name] = r
             print(f"  p50 {r['p50_ms']:.1f} ms  p90 {r['p90_ms']:.1f} ms  p99 {r['p99_ms']:.1f} ms"
                   f"  max {r['max_ms']:.1f} ms  {r['req_per_s']:.0f} req/s  errors {r['errors']}"
-                  f"  server CPU {r['server_cpu_ms_per_request']:.1f} ms/request",
+                  f"  server CPU {r['server_cpu_ms_per_request']:.1f} ms/request"
+                  f"  client CPU {r['client_cpu_ms_per_request']:.2f} ms/request"
+                  f"  load average {os.getloadavg()[0]:.1f}",
                   file=sys.stderr)
 
         files = sorted(p.name for p in scene.iterdir() if p.is_file())
-        for name, url in (("gsgeo serve", f"{base}/scenes/bench/"),
-                          ("python -m http.server", f"http://127.0.0.1:{hport}/")):
+        tile_servers = (("gsgeo serve", f"{base}/scenes/bench/"),
+                        ("python -m http.server", f"http://127.0.0.1:{hport}/"))
+        for name, url in tile_servers if args.seconds > 0 else ():
             print(f"tiles, {name}: {len(files)} files, {args.seconds:.0f} s...", file=sys.stderr)
             r = throughput_run([url + f for f in files], args.seconds)
             results["tiles"][name] = r
