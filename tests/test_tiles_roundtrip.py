@@ -221,3 +221,27 @@ def test_vertical_crs_without_its_grid_is_refused(tmp_path, rng):
     with pytest.raises(DatumError, match="geoid grid"):
         build_tileset(tmp_path / "in.ply", tmp_path / "out", g, progress=None)
     assert not (tmp_path / "out").exists()
+
+
+def test_worker_processes_write_the_same_tileset(tmp_path, rng):
+    """Forked workers (small blocks, dropped splats, the pyproj grid path) must write exactly
+    the files one process writes; the in-process path is what the tests above check."""
+    s = random_splats(rng, 6000, 3, extent=60.0, centre=(-2000.0, 500.0, 0.0))
+    s.positions[17, 0] = np.nan
+    s.opacities[4000] = np.inf
+    write_ply(tmp_path / "in.ply", s)
+    g = Georeference("crs", crs="EPSG:32617", offset=(330000.0, 4430000.0, 180.0))
+    one = build_tileset(tmp_path / "in.ply", tmp_path / "one", g, max_splats=1000,
+                        progress=None, workers=1)
+    g = Georeference("crs", crs="EPSG:32617", offset=(330000.0, 4430000.0, 180.0))
+    two = build_tileset(tmp_path / "in.ply", tmp_path / "two", g, max_splats=1000,
+                        progress=None, workers=2, block=700)
+    assert (one.splats_written, one.dropped_nonfinite) == (two.splats_written,
+                                                           two.dropped_nonfinite) == (5998, 2)
+    files = sorted(p.relative_to(tmp_path / "one") for p in (tmp_path / "one").rglob("*.glb"))
+    assert len(files) > 3
+    assert files == sorted(p.relative_to(tmp_path / "two") for p in (tmp_path / "two").rglob("*.glb"))
+    for f in files:
+        assert (tmp_path / "one" / f).read_bytes() == (tmp_path / "two" / f).read_bytes(), f
+    assert (tmp_path / "one" / "tileset.json").read_text() == \
+        (tmp_path / "two" / "tileset.json").read_text()

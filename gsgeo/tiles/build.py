@@ -1,10 +1,10 @@
 """`build_tileset`: 3DGS PLY/SPZ -> georeferenced OGC 3D Tiles 1.1 of SPZ-compressed glTF splats.
 
-Pipeline: bounds of the input (one streaming pass) -> scene centre and root ENU frame ->
-second streaming pass turning each block into the root frame and quantising it to SPZ bytes
-(about 84 bytes a splat at SH degree 3 are held) -> tile tree -> tiles compressed and written
-by worker threads (zlib releases the GIL) into a temporary directory beside OUTDIR, which is
-renamed into place at the end.
+Pipeline: bounds of the input (a sample of the centres) -> scene centre and root ENU frame ->
+blocks of splats turned into the root frame and quantised to SPZ bytes by worker processes
+into shared memory (about 80 bytes a splat at SH degree 3 are held) -> tile tree in the
+parent -> tiles packed, compressed and written by the workers into a temporary directory
+beside OUTDIR, which is renamed into place at the end.
 """
 
 from __future__ import annotations
@@ -15,8 +15,6 @@ import shutil
 import sys
 import tempfile
 import time
-from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TextIO
@@ -24,13 +22,16 @@ from typing import TextIO
 import numpy as np
 
 from gsgeo.errors import InputError
-from gsgeo.tiles import gltf, lod, ply, spz
-from gsgeo.tiles.georef import Georeference, ecef_to_geodetic
-from gsgeo.tiles.splats import Splats
+from gsgeo.tiles import gltf, lod, spz
+from gsgeo.tiles.georef import Georeference, Placement, ecef_to_geodetic
+from gsgeo.tiles.source import Source, open_source
+from gsgeo.tiles.workers import cpu_count, pool, shared_empty
 
-#: The scene centre (origin of the root ENU frame) is the centre of the bounding box of this
-#: many splat centres spread through the file; the true extent is checked after reading.
-CENTRE_SAMPLE = 65_536
+#: Splats per task of the quantising pass: small enough that a block's temporaries stay in
+#: the CPU caches, large enough that numpy's per-call overhead is small.
+BLOCK = 16_384
+#: Below this many splats the work is done in the calling process (forking costs more).
+PARALLEL_MIN_SPLATS = 200_000
 
 
 @dataclass
@@ -106,49 +107,6 @@ class Progress:
             self.stream.flush()
 
 
-def _spz_file(path: Path) -> Splats:
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
-    return spz.decode(data)[0]
-
-
-def _source(path: Path, block: int, ring: int):
-    """(count, sh_degree, size_bytes, bounds(), blocks()) of a PLY or SPZ input."""
-    suffix = path.suffix.lower()
-    if suffix == ".spz":
-        s = _spz_file(path)
-        ok = np.isfinite(s.positions).all(axis=1)
-
-        def bounds():
-            p = s.positions[ok]
-            return (p.min(axis=0), p.max(axis=0), int(ok.sum())) if p.size else \
-                (np.zeros(3), np.zeros(3), 0)
-
-        def blocks():
-            for i in range(0, s.count, block):
-                yield s.take(slice(i, i + block))
-        return s.count, s.sh_degree, path.stat().st_size, bounds, blocks
-    if suffix != ".ply":
-        raise InputError(f"{path}: unsupported input; expected a .ply or .spz file")
-    layout = ply.read_layout(path)
-    if isinstance(layout, ply.CompressedLayout):
-        def cbounds():
-            lo, hi, n = np.full(3, np.inf), np.full(3, -np.inf), 0
-            chunks = np.fromfile(layout.path, layout.chunk_dtype, layout.n_chunks,
-                                 offset=layout.chunk_offset)
-            for i, c in enumerate("xyz"):
-                lo[i], hi[i] = np.nanmin(chunks[f"min_{c}"]), np.nanmax(chunks[f"max_{c}"])
-            n = layout.count if np.isfinite(lo).all() and np.isfinite(hi).all() else 0
-            return lo, hi, n
-        return (layout.count, layout.sh_degree, layout.size_bytes, cbounds,
-                lambda: ply.iter_compressed(layout, block))
-    return (layout.count, layout.sh_degree, layout.size_bytes,
-            lambda: ply.ply_bounds(layout, sample=CENTRE_SAMPLE),
-            lambda: ply.iter_ply(layout, block, ring))
-
-
 def _prepare_outdir(outdir: Path, overwrite: bool) -> Path:
     if outdir.exists() and not outdir.is_dir():
         raise InputError(f"{outdir} exists and is not a directory")
@@ -218,19 +176,76 @@ def write_tileset_json(path: Path, root: lod.Node, root_transform: np.ndarray,
     path.write_text(json.dumps(doc, indent=1))
 
 
+@dataclass
+class _Job:
+    """What forked workers read (set before the pool forks; see gsgeo.tiles.workers)."""
+    source: Source
+    placement: Placement
+    held: spz.SpzBytes          # arrays in shared memory, one row per input splat
+    spz_version: int
+    sh_degree: int
+    level: int
+
+
+_JOB: _Job | None = None
+
+
+def _quantise_block(task: tuple[int, int]) -> tuple[int, int]:
+    """Read splats [start, stop), drop non-finite ones, turn them into the root frame and
+    quantise them into held rows [start, start + kept). Returns (start, kept)."""
+    start, stop = task
+    job = _JOB
+    s = job.source.read(start, stop)
+    ok = s.finite_mask()
+    if not ok.all():
+        s = s.take(ok)
+    m = s.count
+    if m:
+        q = spz.quantize(job.placement.apply(s), job.spz_version)
+        h = job.held
+        for f in ("positions", "alphas", "colors", "scales", "rotations", "sh"):
+            getattr(h, f)[start:start + m] = getattr(q, f)
+    return start, m
+
+
+def _write_tile(task: tuple[str, np.ndarray, int, str]) -> int:
+    """Pack, compress and write one tile; returns its number of splats."""
+    name, index, frac, folder = task
+    job = _JOB
+    b = job.held.take(index)   # sorted indices: a near-sequential gather
+    blob = spz.pack(b, job.sh_degree, version=job.spz_version, fractional_bits=frac,
+                    level=job.level)
+    p = b.positions
+    data = gltf.tile_glb(blob, b.count, job.sh_degree, p.min(axis=0), p.max(axis=0))
+    with open(os.path.join(folder, f"{name}.glb"), "wb") as f:
+        f.write(data)
+    return b.count
+
+
+def _held_arrays(count: int, sh_degree: int, spz_version: int) -> spz.SpzBytes:
+    k = sh_degree and {1: 3, 2: 8, 3: 15}[sh_degree]
+    e = shared_empty
+    return spz.SpzBytes(e((count, 3), np.float64), e(count, np.uint8), e((count, 3), np.uint8),
+                        e((count, 3), np.uint8),
+                        e(count, np.uint32) if spz_version == 3 else e((count, 3), np.uint8),
+                        e((count, 3 * k), np.uint8))
+
+
 def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
                   georef: Georeference | None = None, *, max_splats: int = 131_072,
                   parent_splats: int | None = None, spz_version: int = 3, level: int = 1,
                   workers: int | None = None, overwrite: bool = False,
-                  progress: TextIO | None = sys.stderr, block: int = 65_536) -> Summary:
+                  progress: TextIO | None = sys.stderr, block: int = BLOCK) -> Summary:
     """Convert a 3DGS PLY or SPZ file into a tileset directory ``outdir``.
 
     ``level`` is the gzip level of the SPZ payloads (1 fastest, 9 smallest); ``workers``
-    the number of threads compressing tiles (default: CPU count). The result is written to a
-    temporary directory beside ``outdir`` and renamed into place when complete.
+    the number of worker processes (default: the CPUs this process may use; inputs under
+    :data:`PARALLEL_MIN_SPLATS` splats are done in this process). The result is written to
+    a temporary directory beside ``outdir`` and renamed into place when complete.
     """
+    global _JOB
     t0 = time.monotonic()
-    src = Path(input_path)
+    src_path = Path(input_path)
     out = Path(outdir)
     georef = georef or Georeference("none")
     if spz_version not in (2, 3):
@@ -239,82 +254,69 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
         raise InputError("gzip level must be 0..9")
     if max_splats < 1000:
         raise InputError("--max-splats must be at least 1000")
-    nthreads = workers or os.cpu_count() or 2
-    # at most nthreads blocks are in flight while the next is read (see below)
-    count, sh_degree, _, bounds, blocks = _source(src, block, ring=nthreads + 2)
+    if block < 1:
+        raise InputError("block must be positive")
+    src = open_source(src_path, block)
+    count, sh_degree = src.count, src.sh_degree
     if count == 0:
-        raise InputError(f"{src}: the file holds no splats")
-    lo, hi, n_finite = bounds()
-    if n_finite == 0:   # the sample may have missed the few finite ones: look at all
-        lo, hi, n_finite = ply.ply_bounds(ply.read_layout(src)) if src.suffix.lower() == \
-            ".ply" else (lo, hi, 0)
+        raise InputError(f"{src_path}: the file holds no splats")
+    lo, hi, n_finite = src.bounds()
     if n_finite == 0:
-        raise InputError(f"{src}: no splat has finite coordinates")
+        raise InputError(f"{src_path}: no splat has finite coordinates")
     placement = georef.placement(lo, hi)
+    nproc = workers or cpu_count()
+    if workers is None and count < PARALLEL_MIN_SPLATS:
+        nproc = 1
     tmp = _prepare_outdir(out, overwrite)
     try:
-        # pass 2: to the root frame, quantised
-        k = sh_degree and {1: 3, 2: 8, 3: 15}[sh_degree]
-        held = spz.SpzBytes(np.empty((count, 3)), np.empty(count, np.uint8),
-                            np.empty((count, 3), np.uint8), np.empty((count, 3), np.uint8),
-                            np.empty(count, np.uint32) if spz_version == 3
-                            else np.empty((count, 3), np.uint8),
-                            np.empty((count, 3 * k), np.uint8))
-        bar = Progress(progress, count, "reading")
-        n = 0
-
-        def prepare(s: Splats) -> spz.SpzBytes | None:
-            ok = s.finite_mask()
-            if not ok.all():
-                s = s.take(ok)
-            return spz.quantize(placement.apply(s), spz_version) if s.count else None
-
-        with ThreadPoolExecutor(max_workers=nthreads) as pool:
-            pending: deque = deque()
-            # numpy releases the GIL in its loops: blocks are turned and quantised in
-            # parallel, at most nthreads + 1 in flight (bounded memory), kept in file order
-            for s in blocks():
-                pending.append((pool.submit(prepare, s), s.count))
-                while len(pending) > nthreads:
-                    n = _store(held, n, *pending.popleft(), bar)
-            while pending:
-                n = _store(held, n, *pending.popleft(), bar)
-        bar.close()
-        dropped = count - n
-        if n == 0:
-            raise InputError(f"{src}: every splat has NaN or infinite values")
-        held = held.take(slice(0, n))
-        extent = float(np.abs(held.positions).max())
-        frac = spz.fractional_bits_for(extent)
-        if frac < spz.DEFAULT_FRACTIONAL_BITS:
-            georef.warnings.append(
-                f"the scene reaches {extent:.0f} m from its centre: SPZ positions use {frac} "
-                f"fractional bits ({1000 / 2 ** frac:.2f} mm steps) instead of 12")
-        root = lod.build_tree(held.positions.astype(np.float32), lod.splat_radius(held.scales),
-                              lod.importance(held.alphas, held.scales),
-                              max_splats=max_splats, parent_splats=parent_splats)
-        nodes = [nd for nd in root.walk() if nd.index.shape[0]]
-        (tmp / "tiles").mkdir()
-        bar = Progress(progress, n, "writing")
-
-        def write(node: lod.Node) -> int:
-            b = held.take(np.sort(node.index))   # sorted: a near-sequential gather
-            blob = spz.pack(b, sh_degree, version=spz_version, fractional_bits=frac, level=level)
-            p = b.positions
-            data = gltf.tile_glb(blob, b.count, sh_degree, p.min(axis=0), p.max(axis=0))
-            (tmp / "tiles" / f"{node.name}.glb").write_bytes(data)
-            return b.count
-
-        with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 2) as pool:
+        held = _held_arrays(count, sh_degree, spz_version)
+        _JOB = _Job(src, placement, held, spz_version, sh_degree, level)
+        with pool(nproc) as imap:
+            bar = Progress(progress, count, "reading")
+            kept: list[tuple[int, int]] = []
+            blocks = [(i, min(count, i + block)) for i in range(0, count, block)]
+            for start, m in imap(_quantise_block, blocks):
+                kept.append((start, m))
+                bar.update(min(count, start + block) - start)
+            bar.close()
+            kept.sort()
+            n = sum(m for _, m in kept)
+            dropped = count - n
+            if n == 0:
+                raise InputError(f"{src_path}: every splat has NaN or infinite values")
+            # rows of dropped splats are never referenced: tiles gather by index
+            rows = None if n == count else np.concatenate(
+                [np.arange(a, a + m, dtype=np.int64) for a, m in kept])
+            pos = held.positions if rows is None else held.positions[rows]
+            extent = float(np.abs(pos).max())
+            frac = spz.fractional_bits_for(extent)
+            if frac < spz.DEFAULT_FRACTIONAL_BITS:
+                georef.warnings.append(
+                    f"the scene reaches {extent:.0f} m from its centre: SPZ positions use "
+                    f"{frac} fractional bits ({1000 / 2 ** frac:.2f} mm steps) instead of 12")
+            sc = held.scales if rows is None else held.scales[rows]
+            al = held.alphas if rows is None else held.alphas[rows]
+            root = lod.build_tree(pos.astype(np.float32), lod.splat_radius(sc),
+                                  lod.importance(al, sc), max_splats=max_splats,
+                                  parent_splats=parent_splats)
+            del pos, sc, al
+            nodes = [nd for nd in root.walk() if nd.index.shape[0]]
+            if rows is not None:
+                for nd in nodes:
+                    nd.index = rows[nd.index]
+            (tmp / "tiles").mkdir()
+            bar = Progress(progress, n, "writing")
             # biggest first so the last tiles to finish are small
-            for done in pool.map(write, sorted(nodes, key=lambda nd: -nd.index.shape[0])):
+            tasks = [(nd.name, nd.index, frac, str(tmp / "tiles"))
+                     for nd in sorted(nodes, key=lambda nd: -nd.index.shape[0])]
+            for done in imap(_write_tile, tasks):
                 bar.update(done)
-        bar.close()
+            bar.close()
         lon, lat, h = ecef_to_geodetic(_corners(root.lo.astype(float), root.hi.astype(float))
                                        @ placement.r_root
                                        + placement.centre_ecef)
         summary = Summary(
-            input=str(src), output=str(out), splats_in=count, splats_written=n,
+            input=str(src_path), output=str(out), splats_in=count, splats_written=n,
             dropped_nonfinite=dropped, sh_degree=sh_degree, tiles=len(nodes),
             levels=1 + max(nd.level for nd in root.walk()),
             georeference=georef.describe(), operation_accuracy_m=placement.operation_accuracy_m,
@@ -333,19 +335,10 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        _JOB = None
     summary.seconds = time.monotonic() - t0
     return summary
-
-
-def _store(held: spz.SpzBytes, n: int, fut, block_count: int, bar: Progress) -> int:
-    q = fut.result()
-    bar.update(block_count)
-    if q is None:
-        return n
-    m = q.count
-    for f in ("positions", "alphas", "colors", "scales", "rotations", "sh"):
-        getattr(held, f)[n:n + m] = getattr(q, f)
-    return n + m
 
 
 def _corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

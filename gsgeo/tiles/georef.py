@@ -342,6 +342,12 @@ class _GridPlacement(Placement):
                 f"{self.geog.name} -> WGS 84 goes through '{self.to_ecef_t.description}' "
                 f"(accuracy {'unknown' if acc is None else f'{acc:g} m'})")
         self.ax = AXES[georef.axes]
+        # SH coefficients turn by the grid-to-root rotation at the scene centre (one turn for
+        # all: across a tileset's +/-2 km it varies far less than SPZ's SH precision)
+        _, lon_c, lat_c = self._ecef(c_in[None])
+        conv_c = float(np.asarray(self.proj.get_factors(lon_c, lat_c, errcheck=False)
+                                  .meridian_convergence, float)[0])
+        self.sh_rot = self.r_root @ enu_rotation(lat_c[0], lon_c[0]).T @ rot_z(-conv_c) @ self.ax
 
     def _ecef(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Input (axes already Z-up) -> ECEF (N, 3), and geodetic lon, lat on the grid's datum."""
@@ -375,8 +381,7 @@ class _GridPlacement(Placement):
         k = np.sqrt(np.asarray(f.areal_scale, float))
         # grid axes at the splat -> local ENU (turn by -convergence) -> ECEF -> root ENU
         rot = self.r_root @ np.swapaxes(enu_rotation(lat, lon), -1, -2) @ rot_z(-conv) @ self.ax
-        sh_rot = self.r_root @ enu_rotation(lat[0], lon[0]).T @ rot_z(-conv[0]) @ self.ax
-        return self._turn(s, rot, -np.log(k), pos, sh_rot)
+        return self._turn(s, rot, -np.log(k), pos, self.sh_rot)
 
     def to_ecef(self, p: np.ndarray) -> np.ndarray:
         return self._ecef(p @ self.ax.T)[0]

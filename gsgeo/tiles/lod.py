@@ -26,7 +26,7 @@ ERROR_PER_DIAGONAL = 0.25
 
 @dataclass
 class Node:
-    index: np.ndarray                 # splat indices held by this tile
+    index: np.ndarray                 # splat indices held by this tile (sorted)
     lo: np.ndarray                    # box of the whole subtree (root frame, metres)
     hi: np.ndarray
     level: int
@@ -51,31 +51,52 @@ def importance(alphas_u8: np.ndarray, scales_u8: np.ndarray) -> np.ndarray:
     return alphas_u8.astype(np.float32) * np.exp(log_vol * (2.0 / 3.0))
 
 
-def _split(pos_t: np.ndarray, radius: np.ndarray, idx: np.ndarray):
-    """Split indices at medians; returns (indices, lo, hi) per child. pos_t is (3, N)."""
-    p = pos_t[:, idx]
-    r = radius[idx]
-    spread = p.max(axis=1) - p.min(axis=1)
-    axes = [a for a in np.argsort(-spread) if spread[a] >= 0.5 * spread.max()] or [0]
-    parts = [np.arange(idx.shape[0])]
-    for a in axes:
-        nxt = []
-        for part in parts:
-            if part.shape[0] < 2:
-                nxt.append(part)
-                continue
-            half = part.shape[0] // 2
-            order = np.argpartition(p[a, part], half)
-            nxt += [part[order[:half]], part[order[half:]]]
-        parts = nxt
-    out = []
-    for part in parts:
-        if part.shape[0]:
-            # centres' box grown by the largest splat radius: a little loose but cheap, and
-            # a parent's box still contains its children's
-            pp, rr = p[:, part], r[part].max()
-            out.append((idx[np.sort(part)], pp.min(axis=1) - rr, pp.max(axis=1) + rr))
-    return out
+class _Work:
+    """Splat centres, radii, keys and indices, permuted in place so that every tree node is
+    one contiguous range. A node is split with index arithmetic on its own range and the
+    columns are permuted once per node."""
+
+    def __init__(self, pos: np.ndarray, radius: np.ndarray, key: np.ndarray) -> None:
+        n = pos.shape[0]
+        self.pos = np.array(np.asarray(pos).T, dtype=np.float32, order="C")   # (3, N)
+        self.radius = np.array(radius, np.float32)
+        self.key = np.array(key, np.float32)
+        self.perm = np.arange(n, dtype=np.int32 if n < 2**31 else np.int64)
+
+    def box(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """Box of the splat centres in [a, b) grown by the largest splat radius there: a
+        little loose but cheap, and a parent's box still contains its children's."""
+        p = self.pos[:, a:b]
+        r = float(self.radius[a:b].max())
+        return p.min(axis=1).astype(np.float64) - r, p.max(axis=1).astype(np.float64) + r
+
+    def partition(self, a: int, b: int, keep: int) -> list[tuple[int, int]]:
+        """Reorder [a, b): the ``keep`` largest keys first, then the rest split at medians,
+        one split on each axis whose spread is at least half the largest (up to 8 parts).
+        Returns the parts as ranges (the kept splats are [a, a + keep))."""
+        m = b - a
+        order = np.argpartition(-self.key[a:b], keep - 1) if keep < m else np.arange(m)
+        rest = order[keep:]
+        p = self.pos[:, a:b]
+        q = np.take(p, rest, axis=1)      # C order (p[:, rest] would be F order: slow reductions)
+        spread = q.max(axis=1) - q.min(axis=1)
+        axes = [ax for ax in np.argsort(-spread) if spread[ax] >= 0.5 * spread.max()] or [0]
+        parts = [(0, rest.shape[0])]
+        for ax in axes:
+            nxt = []
+            for lo, hi in parts:
+                if hi - lo < 2:
+                    nxt.append((lo, hi))
+                    continue
+                half = (hi - lo) // 2
+                sub = rest[lo:hi]
+                rest[lo:hi] = sub[np.argpartition(p[ax, sub], half)]
+                nxt += [(lo, lo + half), (lo + half, hi)]
+            parts = nxt
+        for arr in (self.pos[0], self.pos[1], self.pos[2], self.radius, self.key, self.perm):
+            arr[a:b] = arr[a:b][order]
+        base = a + keep
+        return [(base + lo, base + hi) for lo, hi in parts if hi > lo]
 
 
 def _tie_breaker(idx: np.ndarray) -> np.ndarray:
@@ -94,35 +115,32 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
                max_splats: int = 131_072, parent_splats: int | None = None) -> Node:
     """Build the tile tree over splat centres ``pos`` (N, 3) with box radii ``radius`` (N,).
 
-    Parents' indices are not sorted; sort them before gathering attributes."""
+    Every node's ``index`` is sorted (tiles gather their attributes near-sequentially). The
+    columns are permuted in place so that each node's splats form one contiguous range: a
+    level of the tree costs a few passes over N, not a gather of every node's subset."""
     if max_splats < 1:
         raise ValueError("max_splats must be positive")
     if parent_splats is None:
         parent_splats = max(1, max_splats // 4)
     parent_splats = min(parent_splats, max_splats)
     n = pos.shape[0]
-    idx_dtype = np.int32 if n < 2**31 else np.int64
-    pos_t = np.ascontiguousarray(np.asarray(pos).T)
-    root_idx = np.arange(n, dtype=idx_dtype)
-    if n:
-        r = radius.max()
-        lo, hi = pos_t.min(axis=1) - r, pos_t.max(axis=1) + r
-    else:
-        lo, hi = np.zeros(3), np.zeros(3)
-    root = Node(root_idx, lo, hi, 0, "0")
-    stack = [root]
+    w = _Work(pos, radius, np.asarray(prominence, np.float32)
+              * _tie_breaker(np.arange(n, dtype=np.int64)))
+    lo, hi = w.box(0, n) if n else (np.zeros(3), np.zeros(3))
+    root = Node(w.perm[:0], lo, hi, 0, "0")
+    stack = [(root, 0, n)]
     while stack:
-        node = stack.pop()
-        idx = node.index
-        if idx.shape[0] <= max_splats:
+        node, a, b = stack.pop()
+        if b - a <= max_splats:
+            node.index = np.sort(w.perm[a:b])
             continue
-        order = np.argpartition(-(prominence[idx] * _tie_breaker(idx)), parent_splats - 1)
-        # argpartition scrambles the order; sorted indices keep gathers near-sequential
-        node.index, rest = idx[order[:parent_splats]], np.sort(idx[order[parent_splats:]])
-        for i, (part, clo, chi) in enumerate(_split(pos_t, radius, rest)):
-            child = Node(part, clo, chi, node.level + 1, f"{node.name}_{i}")
+        parts = w.partition(a, b, parent_splats)
+        node.index = np.sort(w.perm[a:a + parent_splats])
+        for i, (clo, chi) in enumerate(parts):
+            blo, bhi = w.box(clo, chi)
+            child = Node(w.perm[:0], blo, bhi, node.level + 1, f"{node.name}_{i}")
             node.children.append(child)
-            stack.append(child)
+            stack.append((child, clo, chi))
     return root
 
 

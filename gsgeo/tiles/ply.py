@@ -113,52 +113,73 @@ def _lerp3(chunks: np.ndarray, ci: np.ndarray, names: list[str], packed: np.ndar
     return out
 
 
-def iter_compressed(layout: CompressedLayout, block: int = 65_536) -> Iterator[Splats]:
-    """Splats of a compressed PLY in blocks (block a multiple of 256)."""
-    block = max(256, block // 256 * 256)
+def _compressed_maps(layout: CompressedLayout):
     chunks = np.fromfile(layout.path, layout.chunk_dtype, layout.n_chunks,
                          offset=layout.chunk_offset)
     vert = np.memmap(layout.path, layout.vertex_dtype, "r", layout.vertex_offset,
                      (layout.count,))
     sh_all = None if layout.sh_dtype is None else np.memmap(
         layout.path, layout.sh_dtype, "r", layout.sh_offset, (layout.count,))
+    return chunks, vert, sh_all
+
+
+def read_compressed(layout: CompressedLayout, start: int, stop: int, maps=None) -> Splats:
+    """Splats [start, stop) of a compressed PLY (``maps`` from a previous call may be reused)."""
+    chunks, vert, sh_all = maps or _compressed_maps(layout)
+    v = np.array(vert[start:stop])
+    n = v.shape[0]
+    ci = (np.arange(start, start + n) >> 8)
+    pos = _lerp3(chunks, ci, ["x", "y", "z"], v["packed_position"]).astype(np.float64)
+    scales = _lerp3(chunks, ci, ["scale_x", "scale_y", "scale_z"], v["packed_scale"])
+    pr = v["packed_rotation"]
+    largest = (pr >> np.uint32(30)).astype(np.int64)
+    abc = np.stack([(_unorm(pr, s, 10) - np.float32(0.5)) * np.float32(np.sqrt(2))
+                    for s in (20, 10, 0)], axis=1)
+    wxyz = np.empty((n, 4), np.float32)
+    # the three stored components fill the other slots in ascending order
+    slots = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])[largest]
+    np.put_along_axis(wxyz, slots, abc, axis=1)
+    np.put_along_axis(wxyz, largest[:, None],
+                      np.sqrt(np.maximum(0, 1 - (abc * abc).sum(axis=1)))[:, None], axis=1)
+    rotations = wxyz[:, [1, 2, 3, 0]]
+    pc = v["packed_color"]
+    rgb = np.stack([_unorm(pc, s, 8) for s in (24, 16, 8)], axis=1)
+    if "min_r" in layout.chunk_dtype.names:
+        for i, c in enumerate("rgb"):
+            lo, hi = chunks[f"min_{c}"][ci], chunks[f"max_{c}"][ci]
+            rgb[:, i] = lo * (1 - rgb[:, i]) + hi * rgb[:, i]
+    colors = (rgb - np.float32(0.5)) / np.float32(SH_C0)
+    alpha = np.clip(_unorm(pc, 0, 8), 0.25 / 255, 254.75 / 255)
+    opacities = np.log(alpha) - np.log1p(-alpha)
+    k = layout.n_rest // 3
+    if k:
+        b = np.array(sh_all[start:start + n]).view(np.uint8).reshape(n, layout.n_rest)
+        b = b[:, [layout.sh_dtype.names.index(f"f_rest_{i}") for i in range(layout.n_rest)]]
+        nrm = (b.astype(np.float32) + np.float32(0.5)) / np.float32(256)
+        nrm[b == 0], nrm[b == 255] = 0.0, 1.0
+        sh = ((nrm - np.float32(0.5)) * np.float32(8)).reshape(n, 3, k).transpose(0, 2, 1)
+    else:
+        sh = np.zeros((n, 0, 3), np.float32)
+    return Splats(pos, scales, rotations, opacities.astype(np.float32), colors,
+                  np.ascontiguousarray(sh))
+
+
+def iter_compressed(layout: CompressedLayout, block: int = 65_536) -> Iterator[Splats]:
+    """Splats of a compressed PLY in blocks."""
+    maps = _compressed_maps(layout)
     for start in range(0, layout.count, block):
-        v = np.array(vert[start:start + block])
-        n = v.shape[0]
-        ci = (np.arange(start, start + n) >> 8)
-        pos = _lerp3(chunks, ci, ["x", "y", "z"], v["packed_position"]).astype(np.float64)
-        scales = _lerp3(chunks, ci, ["scale_x", "scale_y", "scale_z"], v["packed_scale"])
-        pr = v["packed_rotation"]
-        largest = (pr >> np.uint32(30)).astype(np.int64)
-        abc = np.stack([(_unorm(pr, s, 10) - np.float32(0.5)) * np.float32(np.sqrt(2))
-                        for s in (20, 10, 0)], axis=1)
-        wxyz = np.empty((n, 4), np.float32)
-        # the three stored components fill the other slots in ascending order
-        slots = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])[largest]
-        np.put_along_axis(wxyz, slots, abc, axis=1)
-        np.put_along_axis(wxyz, largest[:, None],
-                          np.sqrt(np.maximum(0, 1 - (abc * abc).sum(axis=1)))[:, None], axis=1)
-        rotations = wxyz[:, [1, 2, 3, 0]]
-        pc = v["packed_color"]
-        rgb = np.stack([_unorm(pc, s, 8) for s in (24, 16, 8)], axis=1)
-        if "min_r" in layout.chunk_dtype.names:
-            for i, c in enumerate("rgb"):
-                lo, hi = chunks[f"min_{c}"][ci], chunks[f"max_{c}"][ci]
-                rgb[:, i] = lo * (1 - rgb[:, i]) + hi * rgb[:, i]
-        colors = (rgb - np.float32(0.5)) / np.float32(SH_C0)
-        alpha = np.clip(_unorm(pc, 0, 8), 0.25 / 255, 254.75 / 255)
-        opacities = np.log(alpha) - np.log1p(-alpha)
-        k = layout.n_rest // 3
-        if k:
-            b = np.array(sh_all[start:start + n]).view(np.uint8).reshape(n, layout.n_rest)
-            b = b[:, [layout.sh_dtype.names.index(f"f_rest_{i}") for i in range(layout.n_rest)]]
-            nrm = (b.astype(np.float32) + np.float32(0.5)) / np.float32(256)
-            nrm[b == 0], nrm[b == 255] = 0.0, 1.0
-            sh = ((nrm - np.float32(0.5)) * np.float32(8)).reshape(n, 3, k).transpose(0, 2, 1)
-        else:
-            sh = np.zeros((n, 0, 3), np.float32)
-        yield Splats(pos, scales, rotations, opacities.astype(np.float32), colors,
-                     np.ascontiguousarray(sh))
+        yield read_compressed(layout, start, min(layout.count, start + block), maps)
+
+
+def compressed_bounds(layout: CompressedLayout) -> tuple[np.ndarray, np.ndarray, int]:
+    """Bounds of a compressed PLY's centres from its chunk records (no pass over the splats)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    chunks = np.fromfile(layout.path, layout.chunk_dtype, layout.n_chunks,
+                         offset=layout.chunk_offset)
+    for i, c in enumerate("xyz"):
+        lo[i], hi[i] = np.nanmin(chunks[f"min_{c}"]), np.nanmax(chunks[f"max_{c}"])
+    n = layout.count if np.isfinite(lo).all() and np.isfinite(hi).all() else 0
+    return lo, hi, n
 
 
 @dataclass
@@ -258,7 +279,7 @@ def read_layout(path: str | os.PathLike) -> PlyLayout | CompressedLayout:
                      "f_dc" if has_dc else "rgb", n_rest)
 
 
-def _records_to_splats(rec: np.ndarray, layout: PlyLayout) -> Splats:
+def records_to_splats(rec: np.ndarray, layout: PlyLayout) -> Splats:
     n = rec.shape[0]
     names = list(rec.dtype.names)
     uniform = len(set(rec.dtype[i] for i in range(len(names)))) == 1 and \
@@ -298,42 +319,60 @@ def _records_to_splats(rec: np.ndarray, layout: PlyLayout) -> Splats:
     return Splats(positions, scales, rotations, opacities, colors, sh)
 
 
-def iter_records(layout: PlyLayout, block: int = 262_144,
-                 ring: int = 0) -> Iterator[np.ndarray]:
-    """Vertex records in blocks (structured arrays); memory is bounded by the block size.
-
-    With ``ring`` > 0 the blocks are read into that many recycled buffers (no page faults
-    for fresh memory each block): block i is overwritten by block i + ring, so a consumer
-    must be done with a block before ``ring`` more are read.
-    """
+def iter_records(layout: PlyLayout, block: int = 262_144) -> Iterator[np.ndarray]:
+    """Vertex records in blocks (structured arrays); memory is bounded by the block size."""
     if layout.fmt == "ascii":
-        from plyfile import PlyData  # ASCII is rare for 3DGS; read it whole
-        data = PlyData.read(str(layout.path))["vertex"].data
+        data = read_ascii_records(layout)
         for i in range(0, len(data), block):
             yield data[i:i + block]
         return
-    size = layout.dtype.itemsize
-    with open(layout.path, "rb") as f:
-        f.seek(layout.data_offset)
-        left = layout.count
-        bufs = [np.empty(min(block, layout.count), layout.dtype) for _ in range(ring)]
-        i = 0
-        while left > 0:
-            m = min(block, left)
-            # blocks are consumed concurrently and keep views of their buffer
-            rec = bufs[i % ring][:m] if ring else np.empty(m, layout.dtype)
-            i += 1
-            got = f.readinto(memoryview(rec.view(np.uint8)))
-            if got != m * size:
-                raise InputError(f"{layout.path}: file ended inside the vertex data")
-            yield rec
-            left -= m
+    reader = RecordReader(layout, block)
+    for start in range(0, layout.count, block):
+        yield reader.read(start, min(layout.count, start + block)).copy()
 
 
-def iter_ply(layout: PlyLayout, block: int = 262_144, ring: int = 0) -> Iterator[Splats]:
-    """Splats of a PLY in blocks, as stored (frame of the file); see iter_records for ring."""
-    for rec in iter_records(layout, block, ring):
-        yield _records_to_splats(rec, layout)
+def read_ascii_records(layout: PlyLayout) -> np.ndarray:
+    """All vertex records of an ASCII PLY (rare for 3DGS: read whole, with plyfile)."""
+    from plyfile import PlyData
+    return PlyData.read(str(layout.path))["vertex"].data
+
+
+class RecordReader:
+    """Reads ranges of vertex records of a binary PLY with pread into one reused buffer.
+
+    Safe to share across fork (each process opens its own descriptor on first use). The
+    array returned by :meth:`read` is overwritten by the next call."""
+
+    def __init__(self, layout: PlyLayout, block: int) -> None:
+        self.layout, self.block = layout, block
+        self._fd: int | None = None
+        self._pid = -1
+        self._buf: np.ndarray | None = None
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        if self._pid != os.getpid():
+            self._fd = os.open(self.layout.path, os.O_RDONLY)
+            self._pid = os.getpid()
+            self._buf = np.empty(self.block, self.layout.dtype)
+        m = stop - start
+        if m > self._buf.shape[0]:
+            self._buf = np.empty(m, self.layout.dtype)
+        rec = self._buf[:m]
+        size = self.layout.dtype.itemsize
+        view = memoryview(rec.view(np.uint8))
+        got = 0
+        while got < m * size:
+            k = os.preadv(self._fd, [view[got:]], self.layout.data_offset + start * size + got)
+            if k == 0:
+                raise InputError(f"{self.layout.path}: file ended inside the vertex data")
+            got += k
+        return rec
+
+
+def iter_ply(layout: PlyLayout, block: int = 262_144) -> Iterator[Splats]:
+    """Splats of a PLY in blocks, as stored (frame of the file)."""
+    for rec in iter_records(layout, block):
+        yield records_to_splats(rec, layout)
 
 
 def ply_bounds(layout: PlyLayout, sample: int | None = None,
@@ -376,7 +415,7 @@ def read_ply(path: str | os.PathLike) -> Splats:
         return Splats.concatenate(list(iter_compressed(layout)))
     parts = list(iter_ply(layout))
     if not parts:
-        return _records_to_splats(np.zeros(0, layout.dtype), layout)
+        return records_to_splats(np.zeros(0, layout.dtype), layout)
     return Splats.concatenate(parts)
 
 

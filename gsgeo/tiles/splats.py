@@ -52,16 +52,17 @@ class Splats:
                                   "colors", "sh")))
 
     def finite_mask(self) -> np.ndarray:
-        """True for splats whose every value is finite."""
-        ok = np.isfinite(self.positions).all(axis=1)
-        ok &= np.isfinite(self.scales).all(axis=1)
-        ok &= np.isfinite(self.rotations).all(axis=1)
-        ok &= np.linalg.norm(self.rotations, axis=1) > 0
-        ok &= np.isfinite(self.opacities)
-        ok &= np.isfinite(self.colors).all(axis=1)
-        if self.sh.shape[1]:
-            # a sum is NaN/inf when any term is (finite values overflow only beyond 1e36)
-            with np.errstate(over="ignore", invalid="ignore"):
+        """True for splats whose every value is finite (and whose rotation is not zero)."""
+        # A row sum is NaN/inf when any term is; finite values overflow a float32 sum only
+        # beyond 1e37, far outside any meaningful splat attribute. One pass per array.
+        with np.errstate(over="ignore", invalid="ignore"):
+            ok = np.isfinite(self.positions.sum(axis=1))
+            ok &= np.isfinite(self.scales.sum(axis=1))
+            r2 = np.einsum("ij,ij->i", self.rotations, self.rotations)
+            ok &= np.isfinite(r2) & (r2 > 0)
+            ok &= np.isfinite(self.opacities)
+            ok &= np.isfinite(self.colors.sum(axis=1))
+            if self.sh.shape[1]:
                 ok &= np.isfinite(self.sh.sum(axis=(1, 2)))
         return ok
 

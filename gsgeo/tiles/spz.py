@@ -51,9 +51,13 @@ class SpzBytes:
     def count(self) -> int:
         return int(self.positions.shape[0])
 
-    def take(self, idx: np.ndarray) -> SpzBytes:
-        return SpzBytes(self.positions[idx], self.alphas[idx], self.colors[idx],
-                        self.scales[idx], self.rotations[idx], self.sh[idx])
+    def take(self, idx) -> SpzBytes:
+        if isinstance(idx, slice):
+            return SpzBytes(self.positions[idx], self.alphas[idx], self.colors[idx],
+                            self.scales[idx], self.rotations[idx], self.sh[idx])
+        # np.take along axis 0 copies whole rows; arr[idx] on 2-D arrays is several x slower
+        return SpzBytes(*(np.take(a, idx, axis=0) for a in (
+            self.positions, self.alphas, self.colors, self.scales, self.rotations, self.sh)))
 
     @staticmethod
     def concatenate(parts: list[SpzBytes]) -> SpzBytes:
@@ -84,21 +88,25 @@ def _quantize_sh(sh: np.ndarray) -> np.ndarray:
     if k == 0:
         return np.zeros((n, 0), np.uint8)
     bucket = _sh_buckets(k)
-    # work in memory order: PLY blocks arrive as a transposed view of (N, 3, K)
     channel_major = sh.transpose(0, 2, 1)
     if channel_major.strides[2] == channel_major.itemsize:
-        work, b = channel_major, bucket
+        # PLY blocks arrive as a transposed view of (N, 3, K): work in memory order, one
+        # value per column, and reorder the bytes to coefficient-major at the end
+        work = channel_major.reshape(n, 3 * k)   # a view when each row's values are adjacent
+        b = np.tile(bucket, 3)
+        perm = (np.arange(k)[:, None] + k * np.arange(3)[None, :]).reshape(-1)
     else:
-        work, b = sh, bucket[:, None]
+        work, b, perm = sh.reshape(n, 3 * k), np.repeat(bucket, 3), None
     v = work * (np.float32(128.0) / b)
     v += np.float32(128.0) / b + np.float32(0.5)
     # bucket index: floor, clamped so index * bucket <= 255 (truncation is floor once >= 0)
-    np.clip(v, 0, np.float32(256.0) / b - np.float32(0.5), out=v)
-    out = v.astype(np.uint8)
-    out *= b.astype(np.uint8)
-    if work is channel_major:
-        out = out.transpose(0, 2, 1)
-    return np.ascontiguousarray(out).reshape(n, k * 3)
+    np.maximum(v, 0, out=v)
+    np.minimum(v, np.float32(256.0) / b - np.float32(0.5), out=v)
+    out = v.astype(np.uint8).reshape(n, 3 * k)
+    out *= b.astype(np.uint8).reshape(-1)
+    if perm is not None:
+        out = np.take(out, perm, axis=1)
+    return out
 
 
 def pack_rotations_v3(q: np.ndarray) -> np.ndarray:
@@ -182,20 +190,26 @@ def pack(b: SpzBytes, sh_degree: int, *, version: int = 3, fractional_bits: int 
          level: int = 6, antialiased: bool = False) -> bytes:
     """The gzip-compressed SPZ payload of quantised splats (positions in metres, float64)."""
     n = b.count
-    fixed = np.rint(b.positions * (1 << fractional_bits)).astype(np.int64)
+    fixed = np.rint(b.positions * (1 << fractional_bits)).astype(np.int32)
     lim = 2 ** 23 - 1
     if n and (fixed.min() < -lim or fixed.max() > lim):
         raise InputError(f"splat positions exceed the SPZ range of ±{lim / (1 << fractional_bits):.0f} m")
-    pos = fixed.astype("<i4").view(np.uint8).reshape(n, 3, 4)[:, :, :3]
+    k3 = b.sh.shape[1]
+    rot_bytes = 4 if version == 3 else 3
+    sizes = [9 * n, n, 3 * n, 3 * n, rot_bytes * n, k3 * n]
+    raw = np.empty(16 + sum(sizes), np.uint8)
+    raw[:16] = np.frombuffer(struct.pack("<IIIBBBB", MAGIC, version, n, sh_degree,
+                                         fractional_bits, 1 if antialiased else 0, 0), np.uint8)
+    o = 16
+    # 24-bit little-endian: the low three bytes of each int32
+    raw[o:o + 9 * n].reshape(n, 3, 3)[:] = fixed.astype("<i4").view(np.uint8).reshape(n, 3, 4)[:, :, :3]
+    o += 9 * n
     rot = b.rotations.astype("<u4").view(np.uint8) if version == 3 else b.rotations
-    header = struct.pack("<IIIBBBB", MAGIC, version, n, sh_degree, fractional_bits,
-                         1 if antialiased else 0, 0)
+    for arr, size in zip((b.alphas, b.colors, b.scales, rot, b.sh), sizes[1:], strict=True):
+        raw[o:o + size] = arr.reshape(-1)
+        o += size
     comp = compressor(level)
-    parts = [comp.compress(header)]
-    for arr in (pos, b.alphas, b.colors, b.scales, rot, b.sh):
-        parts.append(comp.compress(np.ascontiguousarray(arr).tobytes()))
-    parts.append(comp.flush())
-    return b"".join(parts)
+    return comp.compress(raw) + comp.flush()
 
 
 def decode(data: bytes) -> tuple[Splats, dict]:

@@ -1,0 +1,76 @@
+"""Worker processes for `gsgeo tiles`: forked after the job's state is set up, so they share
+it (copy-on-write) without pickling; results land in shared memory.
+
+numpy releases the GIL only inside its loops; a block of splats needs dozens of short
+numpy calls, so threads leave much of the second core idle. Forked processes do not.
+Where fork is unavailable, or one worker is asked for, tasks run in the calling process.
+"""
+
+from __future__ import annotations
+
+import mmap
+import multiprocessing
+import os
+import signal
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
+
+def shared_empty(shape: tuple[int, ...] | int, dtype) -> np.ndarray:
+    """An uninitialised array in anonymous shared memory: writes by forked workers are seen
+    by the parent (and the pages are returned to the system when the array is freed)."""
+    shape = (shape,) if isinstance(shape, int) else tuple(shape)
+    dtype = np.dtype(dtype)
+    nbytes = max(1, int(np.prod(shape, dtype=np.int64)) * dtype.itemsize)
+    buf = mmap.mmap(-1, nbytes, flags=mmap.MAP_SHARED | mmap.MAP_ANONYMOUS)
+    return np.frombuffer(buf, dtype, count=int(np.prod(shape, dtype=np.int64))).reshape(shape)
+
+
+def can_fork() -> bool:
+    return "fork" in multiprocessing.get_all_start_methods()
+
+
+def _quiet_child() -> None:
+    # Ctrl-C reaches the whole process group: the parent handles it and stops the pool
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class WorkerFailed(Exception):
+    """A non-Exception (e.g. KeyboardInterrupt, SystemExit) escaped a task in a worker."""
+
+
+def _guarded(fn_and_task):
+    fn, task = fn_and_task
+    try:
+        return fn(task)
+    except Exception:
+        raise
+    except BaseException as exc:   # would kill the worker and hang the pool
+        raise WorkerFailed(f"{type(exc).__name__} in a worker: {exc}") from None
+
+
+@contextmanager
+def pool(processes: int) -> Iterator[Callable[[Callable, Iterable], Iterator]]:
+    """Yield ``imap(fn, tasks)``: results in completion order. ``fn`` must be a module-level
+    function; the state it reads must be set before entering (workers fork here)."""
+    if processes <= 1 or not can_fork():
+        yield lambda fn, tasks: (fn(t) for t in tasks)
+        return
+    ctx = multiprocessing.get_context("fork")
+    p = ctx.Pool(processes, initializer=_quiet_child)
+    try:
+        yield lambda fn, tasks: p.imap_unordered(_guarded, ((fn, t) for t in tasks))
+        p.close()
+        p.join()
+    finally:
+        p.terminate()
+
+
+def cpu_count() -> int:
+    """CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
