@@ -21,6 +21,8 @@ import shapely
 
 from gsgeo.crs.resolve import parse_crs
 from gsgeo.errors import InputError
+from gsgeo.export import wkb
+from gsgeo.export.arrow import GEOMETRY, table_stream
 from gsgeo.export.tables import ExportData, Table
 
 SYNC_OPTION = "OGR_SQLITE_SYNCHRONOUS"
@@ -35,75 +37,69 @@ def gpkg_crs(text: str) -> tuple[str, dict[str, str]]:
     return crs.to_wkt(), {"CRS_WKT_EXTENSION": "YES"}
 
 
-def _fields(table: Table) -> tuple[list[np.ndarray], list[str]]:
-    names, data = [], []
-    for name, col in table.columns.items():
-        names.append(name)
-        kind = table.types[name]
-        if kind == "str":
-            data.append(np.asarray(col, dtype=object))
-        elif kind == "int":
-            data.append(np.asarray(col, dtype=np.int32))
-        elif kind == "bool":
-            data.append(np.asarray(col, dtype=bool))
-        else:
-            data.append(np.asarray(col, dtype=np.float64))
-    return data, names
-
-
-def _write_layer(path: Path, name: str, wkb: np.ndarray, table: Table, geometry_type: str,
-                 crs: str, append: bool, description: str) -> None:
-    from pyogrio.raw import write
+def _write_layer(path: Path, name: str, geometry: tuple[np.ndarray, np.ndarray], table: Table,
+                 geometry_type: str, crs: str, append: bool, description: str) -> None:
+    """One layer through pyogrio's Arrow path: GDAL inserts the whole batch in C."""
+    from pyogrio.raw import write_arrow
 
     crs_text, ds_opts = gpkg_crs(crs)
-    data, names = _fields(table)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        write(str(path), wkb, data, names, layer=name, driver="GPKG",
-              geometry_type=geometry_type, crs=crs_text, append=append, nan_as_null=True,
-              dataset_options=None if append else (ds_opts or None),
-              layer_options={"DESCRIPTION": description})
+        write_arrow(table_stream(geometry, table), str(path), layer=name, driver="GPKG",
+                    geometry_name=GEOMETRY, geometry_type=geometry_type, crs=crs_text,
+                    append=append, dataset_options=None if append else (ds_opts or None),
+                    layer_options={"DESCRIPTION": description})
 
 
 def write_gpkg(path: Path, data: ExportData) -> None:
-    """Write every non-empty layer of `data` into a new GeoPackage at `path`."""
+    """Write every non-empty layer of `data` into a new GeoPackage at `path`.
+
+    WKB is assembled with numpy for the large layers (points, rays, ellipses); the few lines,
+    polygons and check points go through shapely.
+    """
     from pyogrio.errors import DataLayerError, DataSourceError, FieldError, GeometryError
 
     unit = f"heights {data.height_type}: {data.vertical_datum}"
-    layers = [("points", shapely.points(data.point_xyz), data.points, "Point Z", data.crs,
+    layers = [("points", lambda: wkb.points(data.point_xyz), data.points, "Point Z", data.crs,
                f"gsgeo measured points; {unit}; sigmas 1 sigma (m), covariances m^2, "
                "ellipses 95 % (m, bearing from grid north)")]
     if data.rays is not None:
-        layers.append(("rays", shapely.linestrings(data.ray_xyz), data.rays, "LineString Z",
+        layers.append(("rays", lambda: wkb.linestrings(data.ray_xyz), data.rays, "LineString Z",
                        data.crs, "gsgeo rays: camera centre to the measured point; residuals "
                        "in pixels and metres; ray_index 0-based"))
     if data.lines is not None:
-        geoms = [shapely.linestrings(data.point_xyz[i]) for i in data.line_index]
-        layers.append(("lines", np.array(geoms, dtype=object), data.lines, "LineString Z",
-                       data.crs, "gsgeo lines through measured points; grid lengths (m) with "
-                       "1 sigma"))
+        layers.append(("lines", lambda: _shapely_wkb(
+            [shapely.linestrings(data.point_xyz[i]) for i in data.line_index], 3),
+            data.lines, "LineString Z", data.crs,
+            "gsgeo lines through measured points; grid lengths (m) with 1 sigma"))
     if data.polygons is not None:
-        geoms = [shapely.polygons(data.point_xyz[np.append(i, i[0])]) for i in data.polygon_index]
-        layers.append(("polygons", np.array(geoms, dtype=object), data.polygons, "Polygon Z",
-                       data.crs, "gsgeo polygons of measured points; grid area (m^2) and "
-                       "perimeter (m) with 1 sigma"))
+        layers.append(("polygons", lambda: _shapely_wkb(
+            [shapely.polygons(data.point_xyz[np.append(i, i[0])]) for i in data.polygon_index], 3),
+            data.polygons, "Polygon Z", data.crs, "gsgeo polygons of measured points; grid "
+            "area (m^2) and perimeter (m) with 1 sigma"))
     if data.ellipses is not None:
-        layers.append(("error_ellipses", shapely.polygons(data.ellipse_xy), data.ellipses,
+        layers.append(("error_ellipses", lambda: wkb.polygons(data.ellipse_xy), data.ellipses,
                        "Polygon", data.horizontal_crs,
                        "gsgeo 95 % horizontal error ellipses of the points (true size)"))
     if data.check_points is not None:
         z3 = bool(np.all(np.isfinite(data.check_xyz[:, 2])))
-        pts = shapely.points(data.check_xyz if z3 else data.check_xyz[:, :2])
-        layers.append(("check_points", pts, data.check_points, "Point Z" if z3 else "Point",
+        layers.append(("check_points",
+                       lambda: wkb.points(data.check_xyz if z3 else data.check_xyz[:, :2]),
+                       data.check_points, "Point Z" if z3 else "Point",
                        data.crs if z3 else data.horizontal_crs,
                        "check points (ground truth); d_* = measured - check"))
     try:
         with _no_sqlite_sync():
-            for k, (name, geoms, table, gtype, crs, desc) in enumerate(layers):
-                wkb = shapely.to_wkb(geoms, output_dimension=3 if gtype.endswith("Z") else 2)
-                _write_layer(path, name, wkb, table, gtype, crs, append=k > 0, description=desc)
+            for k, (name, geometry, table, gtype, crs, desc) in enumerate(layers):
+                _write_layer(path, name, geometry(), table, gtype, crs, append=k > 0,
+                             description=desc)
     except (DataSourceError, DataLayerError, FieldError, GeometryError) as exc:
         raise InputError(f"GDAL could not write the GeoPackage: {exc}") from None
+
+
+def _shapely_wkb(geoms: list, dims: int) -> tuple[np.ndarray, np.ndarray]:
+    return wkb.from_bytes(shapely.to_wkb(np.array(geoms, dtype=object), output_dimension=dims,
+                                         flavor="iso", byte_order=1))
 
 
 @contextlib.contextmanager
