@@ -14,9 +14,10 @@ from plyfile import PlyData, PlyElement
 from gsgeo.cli import main
 from gsgeo.errors import InputError
 from gsgeo.tiles import build as build_mod
-from gsgeo.tiles import lod
+from gsgeo.tiles import lod, spz
 from gsgeo.tiles.build import build_tileset
 from gsgeo.tiles.georef import Georeference
+from gsgeo.tiles.gltf import parse_glb
 from gsgeo.tiles.ply import read_layout, read_ply, write_ply
 from gsgeo.tiles.reader import iter_tileset, read_tileset
 from tests.tiles_helpers import random_splats
@@ -84,6 +85,12 @@ def test_glb_layout(built):
         assert prim["extensions"]["KHR_gaussian_splatting"]["extensions"][
             "KHR_gaussian_splatting_compression_spz_2"]["bufferView"] == 0
         assert g["nodes"][0]["matrix"] == [1, 0, 0, 0, 0, 0, -1, 0, 0, 1, 0, 0, 0, 0, 0, 1]
+        # POSITION min/max bound the centres exactly as they decode from the SPZ payload
+        (blob, _), = parse_glb(path.read_bytes())
+        decoded = spz.decode(blob)[0].positions
+        pos_acc = g["accessors"][prim["attributes"]["POSITION"]]
+        assert pos_acc["min"] == decoded.min(axis=0).tolist()
+        assert pos_acc["max"] == decoded.max(axis=0).tolist()
 
 
 def test_lod_bounds_and_parents_hold_the_most_prominent(built):
@@ -205,7 +212,6 @@ def test_unknown_layout_names_missing_properties(tmp_path, rng):
 
 
 def test_spz_file_input(tmp_path, rng):
-    from gsgeo.tiles import spz
     s = random_splats(rng, 2000, 1)
     (tmp_path / "in.spz").write_bytes(spz.encode(s))
     build_tileset(tmp_path / "in.spz", tmp_path / "out", ORIGIN, progress=None)

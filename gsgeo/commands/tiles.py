@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 from gsgeo.errors import InputError
@@ -65,7 +66,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="gzip level of the SPZ payloads (default 1: fast; 9: ~10%% smaller, "
                         "many times slower)")
     p.add_argument("--workers", type=int, default=None,
-                   help="threads compressing tiles (default: number of CPUs)")
+                   help="worker processes (default: the number of CPUs; inputs under "
+                        "200 000 splats use one)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace OUTDIR if it exists (it is swapped only once complete)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -106,6 +108,9 @@ def georeference_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    # Before numpy loads: its OpenBLAS would otherwise start a spinning thread per CPU in
+    # every worker process for matrices of a few elements (the work is split by processes).
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from gsgeo.tiles.build import build_tileset
 
     if args.workers is not None and args.workers < 1:

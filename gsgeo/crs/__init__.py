@@ -4,11 +4,36 @@ vertical datums and the measurement pipeline. Knows PROJ, never HTTP.
 PROJ never uses the network from gsgeo (PROJ_NETWORK=OFF on import).
 """
 
-from gsgeo.crs.frames import EnuFrame, ecef_to_geodetic, enu_rotation, geodetic_to_ecef
-from gsgeo.crs.grid import GridPoint, GridPoints, analytic_jacobian, to_grid, to_grid_many
-from gsgeo.crs.pipeline import Measurement, MeasurementFailure, measure_point, measure_session
-from gsgeo.crs.resolve import disable_network, grid_crs, parse_crs, source_crs
-from gsgeo.crs.tileset import Tileset
+from importlib import import_module
+
+from gsgeo.crs import resolve as _resolve  # noqa: F401  (sets PROJ_NETWORK=OFF on import)
+
+# Names are loaded on first use (PEP 562): importing one submodule, e.g. gsgeo.crs.frames for
+# `gsgeo tiles`, then does not load the measurement pipeline and everything it needs.
+_WHERE = {
+    "EnuFrame": "frames", "ecef_to_geodetic": "frames", "enu_rotation": "frames",
+    "geodetic_to_ecef": "frames",
+    "GridPoint": "grid", "GridPoints": "grid", "analytic_jacobian": "grid", "to_grid": "grid",
+    "to_grid_many": "grid",
+    "Measurement": "pipeline", "MeasurementFailure": "pipeline", "measure_point": "pipeline",
+    "measure_session": "pipeline",
+    "disable_network": "resolve", "grid_crs": "resolve", "parse_crs": "resolve",
+    "source_crs": "resolve",
+    "Tileset": "tileset",
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(import_module(f"gsgeo.crs.{_WHERE[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'gsgeo.crs' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + list(_WHERE))
+
 
 __all__ = [
     "EnuFrame",

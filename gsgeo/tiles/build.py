@@ -182,6 +182,7 @@ class _Job:
     source: Source
     placement: Placement
     held: spz.SpzBytes          # arrays in shared memory, one row per input splat
+    tree: lod.TreeInput         # the tile tree's inputs, shared too, filled with held
     spz_version: int
     sh_degree: int
     level: int
@@ -190,22 +191,28 @@ class _Job:
 _JOB: _Job | None = None
 
 
-def _quantise_block(task: tuple[int, int]) -> tuple[int, int]:
+def _quantise_block(task: tuple[int, int]) -> tuple[int, int, float]:
     """Read splats [start, stop), drop non-finite ones, turn them into the root frame and
-    quantise them into held rows [start, start + kept). Returns (start, kept)."""
+    quantise them into held rows [start, start + kept), with the tree's inputs. Returns
+    (start, kept, largest |coordinate| in metres)."""
     start, stop = task
     job = _JOB
     s = job.source.read(start, stop)
     ok = s.finite_mask()
     if not ok.all():
         s = s.take(ok)
-    m = s.count
+    m, extent = s.count, 0.0
     if m:
-        q = spz.quantize(job.placement.apply(s), job.spz_version)
-        h = job.held
-        for f in ("positions", "alphas", "colors", "scales", "rotations", "sh"):
-            getattr(h, f)[start:start + m] = getattr(q, f)
-    return start, m
+        end = start + m
+        q = spz.quantize(job.placement.apply(s), job.spz_version,
+                         out=job.held.take(slice(start, end)))
+        t = job.tree
+        t.pos[:, start:end] = q.positions.T
+        t.radius[start:end] = lod.splat_radius(q.scales)
+        t.key[start:end] = lod.importance(q.alphas, q.scales) * lod.tie_breaker(
+            np.arange(start, end, dtype=np.int64))
+        extent = float(np.abs(q.positions).max())
+    return start, m, extent
 
 
 def _write_tile(task: tuple[str, np.ndarray, int, str]) -> int:
@@ -213,10 +220,9 @@ def _write_tile(task: tuple[str, np.ndarray, int, str]) -> int:
     name, index, frac, folder = task
     job = _JOB
     b = job.held.take(index)   # sorted indices: a near-sequential gather
-    blob = spz.pack(b, job.sh_degree, version=job.spz_version, fractional_bits=frac,
-                    level=job.level)
-    p = b.positions
-    data = gltf.tile_glb(blob, b.count, job.sh_degree, p.min(axis=0), p.max(axis=0))
+    blob, lo, hi = spz.pack_bounded(b, job.sh_degree, version=job.spz_version,
+                                    fractional_bits=frac, level=job.level)
+    data = gltf.tile_glb(blob, b.count, job.sh_degree, lo, hi)
     with open(os.path.join(folder, f"{name}.glb"), "wb") as f:
         f.write(data)
     return b.count
@@ -260,6 +266,8 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
     count, sh_degree = src.count, src.sh_degree
     if count == 0:
         raise InputError(f"{src_path}: the file holds no splats")
+    if count >= 2**31:
+        raise InputError(f"{src_path}: {count} splats; at most 2**31 - 1 are supported")
     lo, hi, n_finite = src.bounds()
     if n_finite == 0:
         raise InputError(f"{src_path}: no splat has finite coordinates")
@@ -270,13 +278,18 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
     tmp = _prepare_outdir(out, overwrite)
     try:
         held = _held_arrays(count, sh_degree, spz_version)
-        _JOB = _Job(src, placement, held, spz_version, sh_degree, level)
+        tree = lod.TreeInput(shared_empty((3, count), np.float32),
+                             shared_empty(count, np.float32), shared_empty(count, np.float32),
+                             np.arange(count, dtype=np.int32))
+        _JOB = _Job(src, placement, held, tree, spz_version, sh_degree, level)
         with pool(nproc) as imap:
             bar = Progress(progress, count, "reading")
             kept: list[tuple[int, int]] = []
+            extent = 0.0
             blocks = [(i, min(count, i + block)) for i in range(0, count, block)]
-            for start, m in imap(_quantise_block, blocks):
+            for start, m, ext in imap(_quantise_block, blocks):
                 kept.append((start, m))
+                extent = max(extent, ext)
                 bar.update(min(count, start + block) - start)
             bar.close()
             kept.sort()
@@ -284,26 +297,18 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
             dropped = count - n
             if n == 0:
                 raise InputError(f"{src_path}: every splat has NaN or infinite values")
-            # rows of dropped splats are never referenced: tiles gather by index
-            rows = None if n == count else np.concatenate(
-                [np.arange(a, a + m, dtype=np.int64) for a, m in kept])
-            pos = held.positions if rows is None else held.positions[rows]
-            extent = float(np.abs(pos).max())
+            if n < count:   # rows of dropped splats are left out of the tree
+                rows = np.concatenate([np.arange(a, a + m, dtype=np.int32) for a, m in kept])
+                tree = lod.TreeInput(np.take(tree.pos, rows, axis=1), tree.radius[rows],
+                                     tree.key[rows], rows)
             frac = spz.fractional_bits_for(extent)
             if frac < spz.DEFAULT_FRACTIONAL_BITS:
                 georef.warnings.append(
                     f"the scene reaches {extent:.0f} m from its centre: SPZ positions use "
                     f"{frac} fractional bits ({1000 / 2 ** frac:.2f} mm steps) instead of 12")
-            sc = held.scales if rows is None else held.scales[rows]
-            al = held.alphas if rows is None else held.alphas[rows]
-            root = lod.build_tree(pos.astype(np.float32), lod.splat_radius(sc),
-                                  lod.importance(al, sc), max_splats=max_splats,
-                                  parent_splats=parent_splats)
-            del pos, sc, al
+            root = lod.build_tree_in_place(tree, max_splats=max_splats,
+                                           parent_splats=parent_splats)
             nodes = [nd for nd in root.walk() if nd.index.shape[0]]
-            if rows is not None:
-                for nd in nodes:
-                    nd.index = rows[nd.index]
             (tmp / "tiles").mkdir()
             bar = Progress(progress, n, "writing")
             # biggest first so the last tiles to finish are small

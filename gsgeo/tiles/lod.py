@@ -47,21 +47,35 @@ class Node:
 
 def importance(alphas_u8: np.ndarray, scales_u8: np.ndarray) -> np.ndarray:
     """Prominence of SPZ-quantised splats: alpha x (s1 s2 s3)^(2/3) (a projected area)."""
-    log_vol = scales_u8.astype(np.float32).sum(axis=1) / 16.0 - 30.0
+    s = scales_u8.astype(np.int16)
+    log_vol = (s[:, 0] + s[:, 1] + s[:, 2]).astype(np.float32) / 16.0 - 30.0
     return alphas_u8.astype(np.float32) * np.exp(log_vol * (2.0 / 3.0))
 
 
-class _Work:
-    """Splat centres, radii, keys and indices, permuted in place so that every tree node is
-    one contiguous range. A node is split with index arithmetic on its own range and the
-    columns are permuted once per node."""
+class TreeInput:
+    """Splat centres, radii, keys and indices, permuted in place by :func:`build_tree_in_place`
+    so that every tree node is one contiguous range. A node is split with index arithmetic
+    on its own range and the columns are permuted once per node.
 
-    def __init__(self, pos: np.ndarray, radius: np.ndarray, key: np.ndarray) -> None:
+    ``pos_t`` (3, N) float32 centres (root frame, metres), ``radius`` (N,) float32 box radii,
+    ``key`` (N,) float32 prominence (ties already broken), ``perm`` (N,) int32 splat indices.
+    """
+
+    def __init__(self, pos_t: np.ndarray, radius: np.ndarray, key: np.ndarray,
+                 perm: np.ndarray) -> None:
+        self.pos, self.radius, self.key, self.perm = pos_t, radius, key, perm
+
+    @classmethod
+    def from_splats(cls, pos: np.ndarray, radius: np.ndarray,
+                    prominence: np.ndarray) -> TreeInput:
+        """Copies of (N, 3) centres, radii and prominence; ties broken by index."""
         n = pos.shape[0]
-        self.pos = np.array(np.asarray(pos).T, dtype=np.float32, order="C")   # (3, N)
-        self.radius = np.array(radius, np.float32)
-        self.key = np.array(key, np.float32)
-        self.perm = np.arange(n, dtype=np.int32 if n < 2**31 else np.int64)
+        if n >= 2**31:
+            raise ValueError("more than 2**31 splats")
+        idx = np.arange(n, dtype=np.int32)
+        return cls(np.array(np.asarray(pos).T, dtype=np.float32, order="C"),
+                   np.array(radius, np.float32),
+                   np.asarray(prominence, np.float32) * tie_breaker(idx), idx)
 
     def box(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
         """Box of the splat centres in [a, b) grown by the largest splat radius there: a
@@ -99,7 +113,7 @@ class _Work:
         return [(base + lo, base + hi) for lo, hi in parts if hi > lo]
 
 
-def _tie_breaker(idx: np.ndarray) -> np.ndarray:
+def tie_breaker(idx: np.ndarray) -> np.ndarray:
     """Factors in [1, 1 + 1e-4) from a hash of the splat index.
 
     Prominence comes from quantised bytes, so many splats tie; without this the parent would
@@ -115,17 +129,22 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
                max_splats: int = 131_072, parent_splats: int | None = None) -> Node:
     """Build the tile tree over splat centres ``pos`` (N, 3) with box radii ``radius`` (N,).
 
-    Every node's ``index`` is sorted (tiles gather their attributes near-sequentially). The
-    columns are permuted in place so that each node's splats form one contiguous range: a
-    level of the tree costs a few passes over N, not a gather of every node's subset."""
+    Every node's ``index`` is sorted (tiles gather their attributes near-sequentially)."""
+    return build_tree_in_place(TreeInput.from_splats(pos, radius, prominence),
+                               max_splats=max_splats, parent_splats=parent_splats)
+
+
+def build_tree_in_place(w: TreeInput, *, max_splats: int = 131_072,
+                        parent_splats: int | None = None) -> Node:
+    """The tile tree over ``w``, whose arrays are permuted in place: a level of the tree
+    costs a few passes over N, not a gather of every node's subset. Node indices are values
+    of ``w.perm``, sorted."""
     if max_splats < 1:
         raise ValueError("max_splats must be positive")
     if parent_splats is None:
         parent_splats = max(1, max_splats // 4)
     parent_splats = min(parent_splats, max_splats)
-    n = pos.shape[0]
-    w = _Work(pos, radius, np.asarray(prominence, np.float32)
-              * _tie_breaker(np.arange(n, dtype=np.int64)))
+    n = w.perm.shape[0]
     lo, hi = w.box(0, n) if n else (np.zeros(3), np.zeros(3))
     root = Node(w.perm[:0], lo, hi, 0, "0")
     stack = [(root, 0, n)]
@@ -146,5 +165,6 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
 
 def splat_radius(scales_u8: np.ndarray) -> np.ndarray:
     """Box radius per splat (metres) from SPZ-quantised log scales."""
-    smax = scales_u8.max(axis=1).astype(np.float32) / 16.0 - 10.0
+    smax = np.maximum(np.maximum(scales_u8[:, 0], scales_u8[:, 1]), scales_u8[:, 2])
+    smax = smax.astype(np.float32) / 16.0 - 10.0
     return np.minimum(EXTENT_SIGMAS * np.exp(smax), EXTENT_CAP_M)

@@ -54,17 +54,33 @@ class Splats:
     def finite_mask(self) -> np.ndarray:
         """True for splats whose every value is finite (and whose rotation is not zero)."""
         # A row sum is NaN/inf when any term is; finite values overflow a float32 sum only
-        # beyond 1e37, far outside any meaningful splat attribute. One pass per array.
+        # beyond 1e37, far outside any meaningful splat attribute.
         with np.errstate(over="ignore", invalid="ignore"):
-            ok = np.isfinite(self.positions.sum(axis=1))
-            ok &= np.isfinite(self.scales.sum(axis=1))
+            ok = np.isfinite(_row_sums(self.positions))
+            ok &= np.isfinite(_row_sums(self.scales))
             r2 = np.einsum("ij,ij->i", self.rotations, self.rotations)
             ok &= np.isfinite(r2) & (r2 > 0)
             ok &= np.isfinite(self.opacities)
-            ok &= np.isfinite(self.colors.sum(axis=1))
+            ok &= np.isfinite(_row_sums(self.colors))
             if self.sh.shape[1]:
-                ok &= np.isfinite(self.sh.sum(axis=(1, 2)))
+                # (N, K, 3) is often a transposed view of channel-major (N, 3, K) rows
+                n = self.count
+                cm = self.sh.transpose(0, 2, 1)
+                flat = cm.reshape(n, -1) if cm.strides[2] == cm.itemsize else \
+                    self.sh.reshape(n, -1)
+                ok &= np.isfinite(_row_sums(flat))
         return ok
+
+
+def _row_sums(a: np.ndarray) -> np.ndarray:
+    """Sums of the rows of a 2-D array. numpy's axis=1 reductions loop per row, slow for
+    narrow rows: a few columns are added one by one, wide ones with a matrix-vector product."""
+    if a.shape[1] <= 4:
+        out = a[:, 0].copy()
+        for i in range(1, a.shape[1]):
+            out += a[:, i]
+        return out
+    return a @ np.ones(a.shape[1], a.dtype)
 
 
 # --- quaternions (x, y, z, w) -------------------------------------------------------------

@@ -66,12 +66,15 @@ class SpzBytes:
                                     "sh")))
 
 
-def _u8(x: np.ndarray) -> np.ndarray:
-    """Round and clamp to bytes; works in place on float temporaries."""
+def _u8(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Round and clamp to bytes (into ``out`` if given); works in place on float temporaries."""
     x = np.asarray(x, np.float32)
     np.rint(x, out=x)
     np.clip(x, 0, 255, out=x)
-    return x.astype(np.uint8)
+    if out is None:
+        return x.astype(np.uint8)
+    np.copyto(out, x, casting="unsafe")
+    return out
 
 
 def _sh_buckets(k: int) -> np.ndarray:
@@ -80,13 +83,13 @@ def _sh_buckets(k: int) -> np.ndarray:
     return (1 << (8 - bits)).astype(np.float32)
 
 
-def _quantize_sh(sh: np.ndarray) -> np.ndarray:
+def _quantize_sh(sh: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """SH floats (N, K, 3) to bytes (N, K*3): x·128 + 128 to the nearest multiple of the
     coefficient's bucket (the reference encoder's precision), at most 256 - bucket. (The
     reference encoder rounds twice and clamps to 255; both decode within half a bucket.)"""
     n, k, _ = sh.shape
     if k == 0:
-        return np.zeros((n, 0), np.uint8)
+        return np.zeros((n, 0), np.uint8) if out is None else out
     bucket = _sh_buckets(k)
     channel_major = sh.transpose(0, 2, 1)
     if channel_major.strides[2] == channel_major.itemsize:
@@ -102,10 +105,13 @@ def _quantize_sh(sh: np.ndarray) -> np.ndarray:
     # bucket index: floor, clamped so index * bucket <= 255 (truncation is floor once >= 0)
     np.maximum(v, 0, out=v)
     np.minimum(v, np.float32(256.0) / b - np.float32(0.5), out=v)
-    out = v.astype(np.uint8).reshape(n, 3 * k)
-    out *= b.astype(np.uint8).reshape(-1)
+    u = v.astype(np.uint8).reshape(n, 3 * k)
+    u *= b.astype(np.uint8).reshape(-1)
     if perm is not None:
-        out = np.take(out, perm, axis=1)
+        return np.take(u, perm, axis=1, out=out)
+    if out is None:
+        return u
+    out[:] = u
     return out
 
 
@@ -157,18 +163,27 @@ def unpack_rotations_v2(b: np.ndarray) -> np.ndarray:
     return np.concatenate([xyz, w[:, None]], axis=1)
 
 
-def quantize(s: Splats, version: int = 3) -> SpzBytes:
-    """Quantise splats to SPZ bytes (positions kept float64)."""
+def quantize(s: Splats, version: int = 3, out: SpzBytes | None = None) -> SpzBytes:
+    """Quantise splats to SPZ bytes (positions kept float64), into ``out`` (arrays of
+    s.count rows, e.g. slices of a larger store) if given."""
     alpha = 1.0 / (1.0 + np.exp(-s.opacities.astype(np.float32)))
     rot = pack_rotations_v3(s.rotations) if version == 3 else pack_rotations_v2(s.rotations)
-    return SpzBytes(
-        positions=np.asarray(s.positions, np.float64),
-        alphas=_u8(alpha * 255.0),
-        colors=_u8(s.colors * (COLOR_SCALE * 255.0) + 127.5),
-        scales=_u8((s.scales + 10.0) * 16.0),
-        rotations=rot,
-        sh=_quantize_sh(s.sh),
-    )
+    if out is None:
+        return SpzBytes(
+            positions=np.asarray(s.positions, np.float64),
+            alphas=_u8(alpha * 255.0),
+            colors=_u8(s.colors * (COLOR_SCALE * 255.0) + 127.5),
+            scales=_u8((s.scales + 10.0) * 16.0),
+            rotations=rot,
+            sh=_quantize_sh(s.sh),
+        )
+    out.positions[:] = s.positions
+    _u8(alpha * 255.0, out.alphas)
+    _u8(s.colors * (COLOR_SCALE * 255.0) + 127.5, out.colors)
+    _u8((s.scales + 10.0) * 16.0, out.scales)
+    out.rotations[:] = rot
+    _quantize_sh(s.sh, out.sh)
+    return out
 
 
 def compressor(level: int):
@@ -189,10 +204,22 @@ def fractional_bits_for(extent: float) -> int:
 def pack(b: SpzBytes, sh_degree: int, *, version: int = 3, fractional_bits: int = 12,
          level: int = 6, antialiased: bool = False) -> bytes:
     """The gzip-compressed SPZ payload of quantised splats (positions in metres, float64)."""
+    return pack_bounded(b, sh_degree, version=version, fractional_bits=fractional_bits,
+                        level=level, antialiased=antialiased)[0]
+
+
+def pack_bounded(b: SpzBytes, sh_degree: int, *, version: int = 3, fractional_bits: int = 12,
+                 level: int = 6, antialiased: bool = False
+                 ) -> tuple[bytes, np.ndarray, np.ndarray]:
+    """:func:`pack`, plus the box (lo, hi: (3,) float64, metres) of the positions as they
+    decode from the payload, for the glTF POSITION accessor."""
     n = b.count
     fixed = np.rint(b.positions * (1 << fractional_bits)).astype(np.int32)
+    # per column: numpy's axis-0 reductions of narrow arrays are several times slower
+    lo = np.array([fixed[:, i].min() if n else 0 for i in range(3)], np.float64)
+    hi = np.array([fixed[:, i].max() if n else 0 for i in range(3)], np.float64)
     lim = 2 ** 23 - 1
-    if n and (fixed.min() < -lim or fixed.max() > lim):
+    if n and (lo.min() < -lim or hi.max() > lim):
         raise InputError(f"splat positions exceed the SPZ range of ±{lim / (1 << fractional_bits):.0f} m")
     k3 = b.sh.shape[1]
     rot_bytes = 4 if version == 3 else 3
@@ -209,7 +236,8 @@ def pack(b: SpzBytes, sh_degree: int, *, version: int = 3, fractional_bits: int 
         raw[o:o + size] = arr.reshape(-1)
         o += size
     comp = compressor(level)
-    return comp.compress(raw) + comp.flush()
+    scale = 1.0 / (1 << fractional_bits)
+    return comp.compress(raw) + comp.flush(), lo * scale, hi * scale
 
 
 def decode(data: bytes) -> tuple[Splats, dict]:
