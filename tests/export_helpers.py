@@ -80,3 +80,69 @@ def proj_data_dir(path):
         yield
     finally:
         pyproj.datadir.set_data_dir(original)
+
+
+def reference_geojson(data, grid: bool = False) -> dict:
+    """The GeoJSON document of an ExportData built with dicts and the json module, as the first
+    writer did: the properties of each table row in column order, NaN -> null, positions
+    rounded (lon, lat 1e-9 degrees; heights and grid coordinates 0.1 mm), polygon rings
+    counterclockwise in the coordinates written, check points without geometry in RFC 7946."""
+    import json
+    import math
+
+    from gsgeo.export.geojson import crs_urn
+
+    def rows(table):
+        cols = []
+        for name, col in table.columns.items():
+            if table.types[name] == "float":
+                cols.append([v if math.isfinite(v) else None for v in np.asarray(col, float).tolist()])
+            elif table.types[name] in ("int", "bool"):
+                cols.append(np.asarray(col).tolist())
+            else:
+                cols.append(list(col))
+        return [dict(zip(table.columns, r, strict=True)) for r in zip(*cols, strict=True)]
+
+    xyz = data.point_xyz if grid else data.point_llh
+    pos = np.round(xyz, 4) if grid else np.column_stack([np.round(xyz[:, :2], 9), np.round(xyz[:, 2], 4)])
+    pos = pos.tolist()
+    feats = [{"type": "Feature", "id": p["point_id"], "geometry": {"type": "Point", "coordinates": q},
+              "properties": {"layer": "points", **p}} for q, p in zip(pos, rows(data.points), strict=True)]
+    meta = {"crs": data.crs, "height_type": data.height_type}
+    for layer, table, index, key in (("lines", data.lines, data.line_index, "line_id"),
+                                     ("polygons", data.polygons, data.polygon_index, "polygon_id")):
+        if table is None:
+            continue
+        for idx, p in zip(index, rows(table), strict=True):
+            p["point_ids"] = json.loads(p["point_ids"])
+            ring = [int(i) for i in idx]
+            if layer == "lines":
+                geom = {"type": "LineString", "coordinates": [pos[i] for i in ring]}
+            else:
+                r = np.array([xyz[i, :2] for i in ring + ring[:1]])
+                if np.sum(r[:-1, 0] * r[1:, 1] - r[1:, 0] * r[:-1, 1]) < 0:
+                    ring = ring[::-1]
+                geom = {"type": "Polygon", "coordinates": [[pos[i] for i in ring + ring[:1]]]}
+            feats.append({"type": "Feature", "id": p[key], "geometry": geom,
+                          "properties": {"layer": layer, **p, **meta}})
+    if data.check_points is not None:
+        for c, p in zip(data.check_xyz, rows(data.check_points), strict=True):
+            geom = None
+            if grid:
+                cc = c.tolist() if math.isfinite(c[2]) else c[:2].tolist()
+                geom = {"type": "Point", "coordinates": [round(v, 4) for v in cc]}
+            feats.append({"type": "Feature", "id": p["point_id"], "geometry": geom,
+                          "properties": {"layer": "check_points", **p, **meta}})
+    doc: dict = {"type": "FeatureCollection"}
+    if grid:
+        doc["crs"] = {"type": "name", "properties": {"name": crs_urn(data.crs)}}
+        doc["rfc7946"] = False
+        doc["description"] = (
+            f"Legacy GeoJSON with grid coordinates (easting, northing, height) in {data.crs} and "
+            "a crs member; NOT RFC 7946. Use the default GeoJSON export for RFC 7946 readers.")
+    else:
+        doc["description"] = (
+            "RFC 7946: longitude, latitude (degrees) and ellipsoidal height (m) on WGS 84; grid "
+            f"coordinates in {data.crs} in the properties.")
+    doc["features"] = feats
+    return json.loads(json.dumps(doc, allow_nan=False))

@@ -6,6 +6,7 @@ for geometry, with independent computations (pyproj, shapely, hand formulas).
 
 from __future__ import annotations
 
+import copy
 import csv
 import json
 import math
@@ -299,6 +300,32 @@ def test_geojson_written_in_chunks_is_the_same_document(bng, tmp_path, monkeypat
     many = json.loads(write_measurements(tmp_path / "b.geojson", res, lines=s.lines,
                                          polygons=s.polygons).read_text())
     assert many == one and len(many["features"]) == 9
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_geojson_text_equals_the_dict_built_document(odn, tmp_path, grid):
+    """The template-filled GeoJSON parses to the document built with dicts and json
+    (export_helpers.reference_geojson): same values, same precision, nulls, escaping."""
+    from export_helpers import reference_geojson
+
+    from gsgeo.export.geojson import feature_collection
+    from gsgeo.export.tables import collect
+
+    s, res = odn
+    res = list(res)
+    k = next(i for i, m in enumerate(res) if m.point_id == "P5")  # not in the polygon
+    res[k] = copy.copy(res[k])
+    res[k].point_id, res[k].description = "P%1 \"ü\"", 'a,"b"\n%s %b \\ 角\u2028'
+    lines = [{"id": "L%d", "points": [res[k].point_id, "P2", "P3"]}]
+    cps = [{"id": "P2", "easting": 1.0, "northing": 2.0, "height": 3.0}, {"id": "C9", "x": 5.0, "y": 6.0}]
+    data = collect(res, lines=lines, polygons=s.polygons, check_points=cps, map_layers=False)
+    want = reference_geojson(data, grid=grid)
+    out = write_measurements(tmp_path / "x.geojson", res, lines=lines, polygons=s.polygons,
+                             check_points=cps, fmt="geojson-grid" if grid else "geojson")
+    got = json.loads(out.read_text(encoding="utf-8"))
+    assert got == want and feature_collection(data, grid=grid) == want
+    assert got["features"][k]["id"] == "P%1 \"ü\"" and len(got["features"]) == 6 + 1 + 1 + 2
+    assert any(f["properties"]["max_residual_px"] is None for f in got["features"][:6])
 
 
 def test_geojson_legacy_grid(odn, tmp_path):
