@@ -154,3 +154,68 @@ def test_self_intersection_simple_rings_pass(rng):
     sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [-0.5, 0.5]], dtype=float)
     assert ring_self_intersection(sq) is None
     assert ring_self_intersection(sq[[0, 2, 1, 3, 4]]) is not None
+
+
+def _nan_none(v):
+    return np.nan if v is None else v
+
+
+def test_many_equal_single_feature_results(rng):
+    """line_measures_many / polygon_measures_many give line_measures / polygon_measures' values
+    (feet, unknown heights and covariances included) and flag exactly the features they reject."""
+    from gsgeo.export.features import line_measures_many, polygon_measures_many
+
+    lines, polys = [], []
+    for k in range(60):
+        n = int(rng.integers(2, 7))
+        xyz = np.column_stack([E0 + rng.normal(0, 20, n), N0 + rng.normal(0, 20, n), rng.normal(50, 5, n)])
+        cov = _random_cov(rng, n)
+        if k % 7 == 0:
+            xyz[0, 2] = np.nan  # unknown height: no 3-D length
+        if k % 11 == 0:
+            cov[-1, 2, 2] = np.nan  # unknown vertical variance: no 3-D sigma
+        lines.append((xyz, cov))
+        m = int(rng.integers(3, 9))  # star-shaped rings: simple
+        ang = np.sort(rng.uniform(0, 2 * np.pi, m)) if k % 2 else np.linspace(0, 2 * np.pi, m, endpoint=False)
+        r = rng.uniform(5, 10, m)
+        ring = np.column_stack([E0 + r * np.cos(ang), N0 + r * np.sin(ang), rng.normal(50, 1, m)])
+        polys.append((ring if k % 3 else ring[::-1], _random_cov(rng, m)))
+    bad_lines = [np.array([[1.0, 2.0, 3.0]]), np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 9.0]])]
+    bad_polys = [np.array(p, dtype=float) for p in (
+        [[0, 0, 0], [2, 2, 0], [2, 0, 0], [0, 2, 0]], [[0, 0, 0], [1, 0, 0], [1, 0, 0], [0, 1, 0]],
+        [[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 0, 0], [4, 0, 0], [4, 4, 0], [2, 0, 0], [0, 4, 0]],
+        [[0, 0, 0], [1, 0, 0]])]
+    lines += [(b + [E0, N0, 0], _random_cov(rng, len(b))) for b in bad_lines]
+    polys += [(b + [E0, N0, 0], _random_cov(rng, len(b))) for b in bad_polys]
+    cov_nan = _random_cov(rng, 3)
+    cov_nan[1, 0, 1] = np.nan  # horizontal covariance unknown: an input error
+    lines.append((lines[1][0][:2], cov_nan[:2]))
+    for unit in (1.0, 0.3048006096012192):
+        out, ok = line_measures_many([x for x, _ in lines], [c for _, c in lines], unit_m=unit,
+                                     vertical_unit_m=unit)
+        assert ok.sum() == 60 and not ok[60:].any()
+        for k, (x, c) in enumerate(lines):
+            if not ok[k]:
+                with pytest.raises((GeometryError, InputError)):
+                    line_measures(x, c, unit_m=unit, vertical_unit_m=unit)
+                continue
+            m = line_measures(x, c, unit_m=unit, vertical_unit_m=unit)
+            got = [out.n_points[k], out.length_2d[k], out.sigma_length_2d[k], out.length_3d[k],
+                   out.sigma_length_3d[k]]
+            want = [m.n_points, m.length_2d, m.sigma_length_2d, _nan_none(m.length_3d),
+                    _nan_none(m.sigma_length_3d)]
+            np.testing.assert_allclose(got, want, rtol=1e-13, atol=0)
+        out, ok = polygon_measures_many([x for x, _ in polys], [c for _, c in polys], unit_m=unit)
+        assert ok.sum() == 60 and not ok[60:].any()
+        for k, (x, c) in enumerate(polys):
+            if not ok[k]:
+                with pytest.raises(GeometryError):
+                    polygon_measures(x, c, unit_m=unit)
+                continue
+            m = polygon_measures(x, c, unit_m=unit)
+            assert out.counterclockwise[k] == m.counterclockwise == (k % 3 != 0)
+            np.testing.assert_allclose(
+                [out.n_points[k], out.area_2d[k], out.sigma_area_2d[k], out.perimeter_2d[k],
+                 out.sigma_perimeter_2d[k]],
+                [m.n_points, m.area_2d, m.sigma_area_2d, m.perimeter_2d, m.sigma_perimeter_2d],
+                rtol=1e-12, atol=0)

@@ -244,3 +244,146 @@ def polygon_measures(xyz, cov=None, ids: Sequence[str] | None = None, *, unit_m:
         s_area = float(np.sqrt(_variance(g_area, c)))
         s_perim = float(np.sqrt(_variance(g_perim, c)))
     return PolygonMeasures(n, abs(signed), s_area, perim, s_perim, signed > 0)
+
+
+# Many lines or polygons at once -----------------------------------------------------------------
+# The functions below give what line_measures / polygon_measures give, vectorised over all
+# features of one vertex count. They do not raise: a feature that fails any check of the
+# single-feature function (or one they cannot be sure of) is flagged not ok, its values NaN;
+# the caller passes it to the single-feature function, which raises the error or gives its values.
+
+
+@dataclass
+class LineArrays:
+    """line_measures of K lines as arrays (NaN where the single function gives None)."""
+
+    n_points: np.ndarray  # (K,) int
+    length_2d: np.ndarray
+    sigma_length_2d: np.ndarray
+    length_3d: np.ndarray
+    sigma_length_3d: np.ndarray
+
+
+@dataclass
+class PolygonArrays:
+    """polygon_measures of K polygons as arrays."""
+
+    n_points: np.ndarray  # (K,) int
+    area_2d: np.ndarray
+    sigma_area_2d: np.ndarray
+    perimeter_2d: np.ndarray
+    sigma_perimeter_2d: np.ndarray
+    counterclockwise: np.ndarray  # (K,) bool
+
+
+def _groups(sizes: np.ndarray):
+    """(n, indices of the features with n points) for each distinct size."""
+    for n in np.unique(sizes):
+        yield int(n), np.flatnonzero(sizes == n)
+
+
+def _variance_many(grad: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """_variance for (K, N, 3) gradients and (K, N, 3, 3) covariances."""
+    c = np.where(grad[..., :, None] * grad[..., None, :] != 0, cov, 0.0)
+    return np.maximum(np.einsum("kni,knij,knj->k", grad, c, grad), 0.0)
+
+
+def _path_length_many(p: np.ndarray, dims: int, closed: bool) -> tuple[np.ndarray, np.ndarray]:
+    """_path_length for (K, N, 3) points: lengths (K,) and gradients (K, N, 3)."""
+    q = p[..., :dims]
+    n = q.shape[1]
+    d = (q[:, _next(n)] - q) if closed else (q[:, 1:] - q[:, :-1])
+    seg = np.sqrt(np.einsum("kni,kni->kn", d, d))
+    u = np.divide(d, seg[..., None], out=np.zeros_like(d), where=seg[..., None] > 0)
+    g = np.zeros(p.shape[:2] + (3,))
+    if closed:
+        g[..., :dims] = u[:, _prev(n)] - u
+    else:
+        g[:, 1:, :dims] += u
+        g[:, :-1, :dims] -= u
+    return seg.sum(axis=1), g
+
+
+def _finite_cov(cov: np.ndarray) -> np.ndarray:
+    return np.all(np.isfinite(cov[..., :2, :2]), axis=(1, 2, 3))
+
+
+def line_measures_many(xyz: Sequence[np.ndarray], cov: Sequence[np.ndarray], *,
+                       unit_m: float = 1.0, vertical_unit_m: float = 1.0
+                       ) -> tuple[LineArrays, np.ndarray]:
+    """`line_measures` of many lines: (measures, ok). xyz[k] (N_k, 3), cov[k] (N_k, 3, 3), m²."""
+    k_all = len(xyz)
+    sizes = np.fromiter(map(len, xyz), dtype=np.int64, count=k_all)
+    out = LineArrays(sizes.copy(), *(np.full(k_all, np.nan) for _ in range(4)))
+    ok = np.zeros(k_all, dtype=bool)
+    scale = np.array([unit_m, unit_m, vertical_unit_m])
+    for n, sel in _groups(sizes):
+        if n < 2:
+            continue
+        p = np.stack([np.asarray(xyz[i], dtype=np.float64) for i in sel]) * scale
+        c = np.stack([np.asarray(cov[i], dtype=np.float64) for i in sel])
+        good = (np.all(np.isfinite(p[..., :2]), axis=(1, 2)) & _finite_cov(c)
+                & np.any(p[:, 1:, :2] != p[:, :1, :2], axis=(1, 2)))
+        l2, g2 = _path_length_many(p, 2, closed=False)
+        out.length_2d[sel] = l2
+        out.sigma_length_2d[sel] = np.sqrt(_variance_many(g2, c))
+        h = np.all(np.isfinite(p[..., 2]), axis=1)
+        l3, g3 = _path_length_many(p, 3, closed=False)
+        out.length_3d[sel] = np.where(h, l3, np.nan)
+        s3 = np.sqrt(_variance_many(g3, np.where(np.isfinite(c), c, 0.0)))
+        out.sigma_length_3d[sel] = np.where(h & np.all(np.isfinite(c), axis=(1, 2, 3)), s3, np.nan)
+        ok[sel] = good
+    return out, ok
+
+
+def polygon_measures_many(xyz: Sequence[np.ndarray], cov: Sequence[np.ndarray], *,
+                          unit_m: float = 1.0) -> tuple[PolygonArrays, np.ndarray]:
+    """`polygon_measures` of many polygons: (measures, ok). Rings given once each (not closed)."""
+    k_all = len(xyz)
+    sizes = np.fromiter(map(len, xyz), dtype=np.int64, count=k_all)
+    out = PolygonArrays(sizes.copy(), *(np.full(k_all, np.nan) for _ in range(4)),
+                        np.zeros(k_all, dtype=bool))
+    ok = np.zeros(k_all, dtype=bool)
+    for n, sel in _groups(sizes):
+        if n < 3:
+            continue
+        p = np.stack([np.asarray(xyz[i], dtype=np.float64) for i in sel])
+        c = np.stack([np.asarray(cov[i], dtype=np.float64) for i in sel])
+        xy = p[..., :2] * unit_m
+        good = np.all(np.isfinite(p[..., :2]), axis=(1, 2)) & _finite_cov(c)
+        good &= ~np.all(p[:, -1, :2] == p[:, 0, :2], axis=1)  # closed explicitly: single path
+        same = np.all(xy[:, :, None, :] == xy[:, None, :, :], axis=-1)
+        good &= ~np.triu(same, k=1).any(axis=(1, 2))
+        q = xy - xy.mean(axis=1, keepdims=True)
+        a, b = q, q[:, _next(n)]
+        i, j = _edge_pairs(n)
+        if i.size:
+            p1, p2, p3, p4 = a[:, i], b[:, i], a[:, j], b[:, j]
+            o1, o2 = _orient(p1, p2, p3), _orient(p1, p2, p4)
+            o3, o4 = _orient(p3, p4, p1), _orient(p3, p4, p2)
+            hit = (o1 * o2 < 0) & (o3 * o4 < 0)
+            hit |= (o1 == 0) & _on_segment(p1, p2, p3)
+            hit |= (o2 == 0) & _on_segment(p1, p2, p4)
+            hit |= (o3 == 0) & _on_segment(p3, p4, p1)
+            hit |= (o4 == 0) & _on_segment(p3, p4, p2)
+            good &= ~hit.any(axis=1)
+        d0 = b - a
+        d1 = d0[:, _next(n)]
+        cross = d0[..., 0] * d1[..., 1] - d0[..., 1] * d1[..., 0]
+        good &= ~((cross == 0) & (np.einsum("kni,kni->kn", d0, d1) < 0)).any(axis=1)
+        nxt, prv = q[:, _next(n)], q[:, _prev(n)]
+        signed = 0.5 * np.sum(q[..., 0] * nxt[..., 1] - nxt[..., 0] * q[..., 1], axis=1)
+        good &= signed != 0.0
+        sgn = np.where(signed > 0, 1.0, -1.0)[:, None]
+        g_area = np.zeros(p.shape[:2] + (3,))
+        g_area[..., 0] = 0.5 * sgn * (nxt[..., 1] - prv[..., 1])
+        g_area[..., 1] = 0.5 * sgn * (prv[..., 0] - nxt[..., 0])
+        flat = np.concatenate([xy, np.zeros(xy.shape[:2] + (1,))], axis=-1)
+        perim, g_perim = _path_length_many(flat, 2, closed=True)
+        out.area_2d[sel] = np.abs(signed)
+        out.sigma_area_2d[sel] = np.sqrt(_variance_many(g_area, c))
+        out.perimeter_2d[sel] = perim
+        out.sigma_perimeter_2d[sel] = np.sqrt(_variance_many(g_perim, c))
+        out.counterclockwise[sel] = signed > 0
+        ok[sel] = good
+    return out, ok

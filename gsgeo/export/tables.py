@@ -23,7 +23,12 @@ import numpy as np
 from gsgeo.crs.pipeline import RECORD_KEYS
 from gsgeo.crs.resolve import grid_crs, parse_crs
 from gsgeo.errors import CRSError, GsgeoError, InputError
-from gsgeo.export.features import line_measures, polygon_measures
+from gsgeo.export.features import (
+    line_measures,
+    line_measures_many,
+    polygon_measures,
+    polygon_measures_many,
+)
 
 #: Column types of the point schema (DESIGN.md, "Point schema"): 'str', 'float' or 'int'.
 POINT_TYPES: dict[str, str] = {k: "float" for k in RECORD_KEYS}
@@ -385,63 +390,84 @@ def _ids_text(pids: Sequence[str]) -> str:
     return json.dumps(list(pids), ensure_ascii=False)
 
 
-def _collect_features(data, lines, polygons, index, failed, ids, xyz, cov, g) -> None:
-    unit, vunit = g.unit_factor, g.vertical_unit_factor
+def _parse_features(items: Iterable[Any], kind: str, index, failed) -> tuple[list, GsgeoError | None]:
+    """(id, point ids, point indices) of each line/polygon up to the first malformed one, and its error."""
     seen: set[str] = set()
     rows = []
-    for i, item in enumerate(lines):
-        fid, pids = _feature_parts(item, "line", i)
-        if fid in seen:
-            raise InputError(f"duplicate line id '{fid}'")
-        seen.add(fid)
-        idx = _resolve("line", fid, pids, index, failed)
+    try:
+        for i, item in enumerate(items):
+            fid, pids = _feature_parts(item, kind, i)
+            if fid in seen:
+                raise InputError(f"duplicate {kind} id '{fid}'")
+            seen.add(fid)
+            if kind == "polygon":
+                if len(pids) > 1 and pids[-1] == pids[0]:
+                    pids = pids[:-1]  # closed explicitly; polygons close themselves
+                dup = next((p for j, p in enumerate(pids) if p in pids[:j]), None)
+                if dup is not None:
+                    raise InputError(f"polygon '{fid}': point '{dup}' appears more than once")
+            rows.append((fid, pids, _resolve(kind, fid, pids, index, failed)))
+    except GsgeoError as exc:
+        return rows, exc
+    return rows, None
+
+
+def _measure_features(kind: str, rows: list, xyz, cov, unit: float, vunit: float):
+    """Measures of all rows at once; a row the batch flags goes through the single-feature
+    function, which raises its error (prefixed with the feature's id) or gives its values."""
+    pts = [xyz[r[2]] for r in rows]
+    covs = [cov[r[2]] for r in rows]
+    if kind == "line":
+        out, ok = line_measures_many(pts, covs, unit_m=unit, vertical_unit_m=vunit)
+    else:
+        out, ok = polygon_measures_many(pts, covs, unit_m=unit)
+    single = line_measures if kind == "line" else polygon_measures
+    for k in np.flatnonzero(~ok):
+        fid, pids, _ = rows[k]
         try:
-            m = line_measures(xyz[idx], cov[idx], pids, unit_m=unit, vertical_unit_m=vunit)
+            m = single(pts[k], covs[k], pids, unit_m=unit, vertical_unit_m=vunit)
         except GsgeoError as exc:
-            raise type(exc)(f"line '{fid}': {exc}") from None
-        rows.append((fid, pids, m))
-        data.line_index.append(idx)
+            raise type(exc)(f"{kind} '{fid}': {exc}") from None
+        for name, value in vars(m).items():
+            getattr(out, name)[k] = math.nan if value is None else value
+    return out
+
+
+def _collect_features(data, lines, polygons, index, failed, ids, xyz, cov, g) -> None:
+    unit, vunit = g.unit_factor, g.vertical_unit_factor
+    rows, err = _parse_features(lines, "line", index, failed)
     if rows:
+        m = _measure_features("line", rows, xyz, cov, unit, vunit)
+        data.line_index = [r[2] for r in rows]
         data.lines = Table({
             "line_id": np.array([r[0] for r in rows], dtype=object),
             "point_ids": np.array([_ids_text(r[1]) for r in rows], dtype=object),
-            "n_points": np.array([r[2].n_points for r in rows], dtype=np.int32),
-            "length_3d": _column([r[2].length_3d for r in rows], "float", "length_3d"),
-            "sigma_length_3d": _column([r[2].sigma_length_3d for r in rows], "float", ""),
-            "length_2d": np.array([r[2].length_2d for r in rows]),
-            "sigma_length_2d": _column([r[2].sigma_length_2d for r in rows], "float", ""),
+            "n_points": m.n_points.astype(np.int32),
+            "length_3d": m.length_3d,
+            "sigma_length_3d": m.sigma_length_3d,
+            "length_2d": m.length_2d,
+            "sigma_length_2d": m.sigma_length_2d,
         }, {"line_id": "str", "point_ids": "str", "n_points": "int", "length_3d": "float",
             "sigma_length_3d": "float", "length_2d": "float", "sigma_length_2d": "float"})
-    seen = set()
-    rows = []
-    for i, item in enumerate(polygons):
-        fid, pids = _feature_parts(item, "polygon", i)
-        if fid in seen:
-            raise InputError(f"duplicate polygon id '{fid}'")
-        seen.add(fid)
-        if len(pids) > 1 and pids[-1] == pids[0]:
-            pids = pids[:-1]  # closed explicitly; polygons close themselves
-        dup = next((p for j, p in enumerate(pids) if p in pids[:j]), None)
-        if dup is not None:
-            raise InputError(f"polygon '{fid}': point '{dup}' appears more than once")
-        idx = _resolve("polygon", fid, pids, index, failed)
-        try:
-            m = polygon_measures(xyz[idx], cov[idx], pids, unit_m=unit, vertical_unit_m=vunit)
-        except GsgeoError as exc:
-            raise type(exc)(f"polygon '{fid}': {exc}") from None
-        rows.append((fid, pids, m))
-        data.polygon_index.append(idx if m.counterclockwise else idx[::-1])
+    if err is not None:
+        raise err
+    rows, err = _parse_features(polygons, "polygon", index, failed)
     if rows:
+        m = _measure_features("polygon", rows, xyz, cov, unit, vunit)
+        data.polygon_index = [idx if ccw else idx[::-1]
+                              for (_, _, idx), ccw in zip(rows, m.counterclockwise, strict=True)]
         data.polygons = Table({
             "polygon_id": np.array([r[0] for r in rows], dtype=object),
             "point_ids": np.array([_ids_text(r[1]) for r in rows], dtype=object),
-            "n_points": np.array([r[2].n_points for r in rows], dtype=np.int32),
-            "area_2d": np.array([r[2].area_2d for r in rows]),
-            "sigma_area_2d": _column([r[2].sigma_area_2d for r in rows], "float", ""),
-            "perimeter_2d": np.array([r[2].perimeter_2d for r in rows]),
-            "sigma_perimeter_2d": _column([r[2].sigma_perimeter_2d for r in rows], "float", ""),
+            "n_points": m.n_points.astype(np.int32),
+            "area_2d": m.area_2d,
+            "sigma_area_2d": m.sigma_area_2d,
+            "perimeter_2d": m.perimeter_2d,
+            "sigma_perimeter_2d": m.sigma_perimeter_2d,
         }, {"polygon_id": "str", "point_ids": "str", "n_points": "int", "area_2d": "float",
             "sigma_area_2d": "float", "perimeter_2d": "float", "sigma_perimeter_2d": "float"})
+    if err is not None:
+        raise err
 
 
 def _collect_check_points(data, check_points, index, xyz, g) -> None:
