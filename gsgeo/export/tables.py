@@ -15,6 +15,7 @@ import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import chain
 from operator import attrgetter
 from typing import Any
 
@@ -107,46 +108,69 @@ def _all_measurements(items: list) -> bool:
     return all(t.__name__ == "Measurement" for t in set(map(type, items)))
 
 
+GRID_FLOATS = ("easting", "northing", "height", "sigma_e", "sigma_n", "sigma_h", "ellipse_major_95",
+               "ellipse_minor_95", "ellipse_bearing_deg", "operation_accuracy_m")
+GRID_TEXTS = ("height_type", "vertical_datum", "crs", "operation")
+
+
+def _fields(objs: list, names: tuple[str, ...]) -> list[tuple]:
+    """The attributes `names` (two or more) of every object, one tuple per name."""
+    return list(zip(*map(attrgetter(*names), objs), strict=True))
+
+
+def _floats(objs: list, names: tuple[str, ...]) -> np.ndarray:
+    """(M, len(names)) float64 of the attributes of every object (two or more names; None -> NaN)."""
+    get = attrgetter(*names)
+    n, f = len(objs), len(names)
+    try:
+        flat = np.fromiter(chain.from_iterable(map(get, objs)), dtype=np.float64, count=n * f)
+    except (TypeError, ValueError):  # None where a value is unknown
+        vals = [math.nan if v is None else v for v in chain.from_iterable(map(get, objs))]
+        try:
+            flat = np.array(vals, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"columns {', '.join(names)}: expected numbers") from None
+    return flat.reshape(n, f)
+
+
 def _measurement_columns(ms: list) -> dict[str, Any] | None:
     """The point-schema columns of Measurement objects without a record() per point.
 
     Gives exactly what Measurement.record() gives (the export tests compare the two), with
-    the per-point numpy reductions done once over all points. None when an object is not a
-    Measurement with a grid point and covariance (the caller then uses record()).
+    each attribute gathered in one pass over all points and the per-point numpy reductions
+    done once. Float columns come back as float64 arrays, text columns as tuples. None when
+    an object is not a Measurement with a grid point and covariance (the caller then uses
+    record()).
     """
     if not _all_measurements(ms):
         return None
-    def attr(objs, name):
-        return list(map(attrgetter(name), objs))
-
-    grids = attr(ms, "grid")
+    pid, code, desc, measured_at, grids, sols, exc = _fields(
+        ms, ("point_id", "code", "description", "measured_at", "grid", "solution", "excluded"))
     if type(None) in set(map(type, grids)):
         return None
-    covs = attr(grids, "covariance")
+    covs = list(map(attrgetter("covariance"), grids))
     if type(None) in set(map(type, covs)):
         return None
-    sols = attr(ms, "solution")
-    cov = np.array(covs, dtype=np.float64)
-    exc = attr(ms, "excluded")
+    cov = np.concatenate(covs, dtype=np.float64).reshape(-1, 3, 3)
     n_all = np.fromiter(map(len, exc), dtype=np.int64, count=len(exc))
     n_excl = np.add.reduceat(np.concatenate(exc).astype(np.int64), np.cumsum(n_all) - n_all)
-    px = attr(sols, "residuals_px")
+    px = list(map(attrgetter("residuals_px"), sols))
     if type(None) not in set(map(type, px)):
         lens = np.fromiter(map(len, px), dtype=np.int64, count=len(px))
         max_px: Any = np.maximum.reduceat(np.concatenate(px), np.cumsum(lens) - lens)
     else:  # a mix of angular and unweighted points
         max_px = [None if v is None else float(np.max(v)) for v in px]
-    out: dict[str, Any] = {k: attr(ms, k) for k in ("point_id", "code", "description")}
-    for k in ("easting", "northing", "height", "height_type", "vertical_datum", "crs",
-              "sigma_e", "sigma_n", "sigma_h", "ellipse_major_95", "ellipse_minor_95",
-              "ellipse_bearing_deg", "operation", "operation_accuracy_m"):
-        out[k] = attr(grids, k)
-    for k in ("sigma0", "max_angle_deg", "rms_m"):
-        out[k] = attr(sols, k)  # numbers: made float64 columns by the caller
+    out: dict[str, Any] = {"point_id": pid, "code": code, "description": desc,
+                           "measured_at": measured_at}
+    gf = _floats(grids, GRID_FLOATS)
+    out.update((k, gf[:, i]) for i, k in enumerate(GRID_FLOATS))
+    out.update(zip(GRID_TEXTS, _fields(grids, GRID_TEXTS), strict=True))
+    sf = _floats(sols, ("sigma0", "max_angle_deg", "rms_m"))
+    out.update((k, sf[:, i]) for i, k in enumerate(("sigma0", "max_angle_deg", "rms_m")))
+    mf = _floats(ms, ("lon", "lat", "h_wgs84"))
+    out.update((k, mf[:, i]) for i, k in enumerate(("lon", "lat", "h_wgs84")))
     out["n_rays"] = n_all - n_excl
     out["max_residual_px"] = max_px
-    for k in ("lon", "lat", "h_wgs84", "measured_at"):
-        out[k] = attr(ms, k)
     for k, (a, b) in {"cov_ee": (0, 0), "cov_en": (0, 1), "cov_eh": (0, 2), "cov_nn": (1, 1),
                       "cov_nh": (1, 2), "cov_hh": (2, 2)}.items():
         out[k] = cov[:, a, b]
@@ -271,7 +295,7 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
         recs = [_record(m) for m in solved]
         raw = {k: [r[k] for r in recs] for k in RECORD_KEYS}
     ids = [str(v) for v in raw["point_id"]] if as_text else raw["point_id"]
-    if type(None) in set(map(type, raw["easting"])) | set(map(type, raw["crs"])):
+    if (not isinstance(raw["easting"], np.ndarray) and None in raw["easting"]) or None in raw["crs"]:
         i = next(i for i, (e, c) in enumerate(zip(raw["easting"], raw["crs"], strict=True))
                  if e is None or c is None)
         raise CRSError(
