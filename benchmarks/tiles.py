@@ -9,10 +9,13 @@ Inputs (written to benchmarks/out/, git-ignored):
   copy with jittered centres, so they compress like real data (random values would not).
   Without the shared data, random splats are used instead (and the table says so).
 
-Each tool runs as a separate process under /usr/bin/time: wall time, splats/s, peak RSS
-against the bound 1.5 x input + 300 MB, output size. gsgeo runs with its defaults (gzip
-level 1 through ISA-L, one worker thread per CPU, georeference by --transform for real.ply
-and by --origin for the synthetic ones); splat-transform writes one .spz (no tiling).
+Each tool runs as a separate process under /usr/bin/time: wall time, splats/s, CPU time,
+peak memory against the bound 1.5 x input + 300 MB (sampled every 20 ms as the sum of the
+proportional set sizes of the tool's whole process tree, gsgeo's worker processes included;
+/usr/bin/time's maximum RSS of the largest single process is shown beside it), output size.
+gsgeo runs with its defaults (gzip level 1 through ISA-L, one worker process per CPU,
+georeference by --transform for real.ply and by --origin for the synthetic ones);
+splat-transform writes one .spz (no tiling).
 Results: benchmarks/out/tiles.json and a Markdown table on stdout.
 """
 
@@ -92,17 +95,55 @@ def make_inputs(sizes: list[int]) -> list[tuple[str, Path, list[str]]]:
     return inputs
 
 
+def _descendants(pid: int) -> list[int]:
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        try:
+            for t in os.listdir(f"/proc/{p}/task"):
+                with open(f"/proc/{p}/task/{t}/children") as f:
+                    todo += [int(c) for c in f.read().split()]
+        except OSError:
+            pass
+    return out
+
+
+def _pss_mb(pids: list[int]) -> float:
+    """Memory of a process tree: the sum of proportional set sizes (shared pages counted
+    once in all, split among the processes sharing them)."""
+    kb = 0
+    for p in pids:
+        try:
+            with open(f"/proc/{p}/smaps_rollup") as f:
+                for line in f:
+                    if line.startswith("Pss:"):
+                        kb += int(line.split()[1])
+                        break
+        except OSError:
+            pass
+    return kb / 1024
+
+
 def timed(cmd: list[str], cwd: Path | None = None) -> dict:
+    """Run cmd under /usr/bin/time; also sample the memory of its whole process tree (worker
+    processes included) every 20 ms: /usr/bin/time's maximum RSS is that of the single
+    largest process, which understates a multi-process tool."""
     tf = OUT / "time.txt"
     t0 = time.monotonic()
-    proc = subprocess.run(["/usr/bin/time", "-f", "%e %M %U %S", "-o", str(tf)] + cmd,
-                          cwd=cwd, capture_output=True, text=True)
+    proc = subprocess.Popen(["/usr/bin/time", "-f", "%e %M %U %S", "-o", str(tf)] + cmd,
+                            cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    peak = 0.0
+    while proc.poll() is None:
+        peak = max(peak, _pss_mb(_descendants(proc.pid)[1:]))   # not /usr/bin/time itself
+        time.sleep(0.02)
+    out, err = proc.communicate()
     wall = time.monotonic() - t0
     if proc.returncode != 0:
-        raise RuntimeError(f"{cmd[0]} failed ({proc.returncode}): {proc.stderr[-2000:]}")
+        raise RuntimeError(f"{cmd[0]} failed ({proc.returncode}): {err[-2000:]}")
     e, m, u, s = tf.read_text().split()[-4:]
     return {"wall_s": float(e) if float(e) > 0 else wall, "peak_rss_mb": int(m) / 1024,
-            "cpu_s": float(u) + float(s), "stdout": proc.stdout}
+            "peak_tree_mb": peak, "cpu_s": float(u) + float(s), "stdout": out}
 
 
 def _size_mb(p: Path) -> float:
@@ -158,13 +199,13 @@ def main() -> int:
     (OUT / "tiles.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     print(f"CPUs {meta['cpus']}, load average at end {meta['load_avg_at_end'][0]:.1f}, "
           f"{meta['date']}\n")
-    print("| input | splats | tool | wall s | splats/s | CPU s | peak RSS MB | bound MB | "
-          "output MB |")
-    print("|---|---:|---|---:|---:|---:|---:|---:|---:|")
+    print("| input | splats | tool | wall s | splats/s | CPU s | peak memory MB (all "
+          "processes) | peak RSS MB (largest process) | bound MB | output MB |")
+    print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['input']} | {r['splats']:,} | {r['tool']} | {r['wall_s']:.2f} | "
-              f"{r['splats_per_s']:,.0f} | {r['cpu_s']:.1f} | {r['peak_rss_mb']:.0f} | "
-              f"{r['rss_bound_mb']:.0f} | {r['output_mb']:.1f} |")
+              f"{r['splats_per_s']:,.0f} | {r['cpu_s']:.1f} | {r['peak_tree_mb']:.0f} | "
+              f"{r['peak_rss_mb']:.0f} | {r['rss_bound_mb']:.0f} | {r['output_mb']:.1f} |")
     by = {}
     for r in rows:
         by.setdefault(r["input"], {})[r["tool"]] = r["wall_s"]

@@ -108,7 +108,8 @@ def _quantize_sh(sh: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     u = v.astype(np.uint8).reshape(n, 3 * k)
     u *= b.astype(np.uint8).reshape(-1)
     if perm is not None:
-        return np.take(u, perm, axis=1, out=out)
+        # mode="clip": with the default "raise", take buffers its output (slow); perm is valid
+        return np.take(u, perm, axis=1, out=out, mode="clip")
     if out is None:
         return u
     out[:] = u
