@@ -287,3 +287,32 @@ def test_broken_compressed_ply_is_named(tmp_path):
     (tmp_path / "b.ply").write_bytes(bad + data[len(head):])
     with pytest.raises(InputError, match="lacks packed_scale"):
         read_layout(tmp_path / "b.ply")
+
+
+def test_tree_grown_by_worker_processes_equals_the_serial_tree():
+    """gsgeo tiles grows subtrees in forked workers on shared memory; the tree must be the
+    one build_tree gives in one process, node for node (indices and boxes)."""
+    from gsgeo.tiles.workers import pool, shared_empty
+
+    rng = np.random.default_rng(1)
+    n = 60_000
+    pos = (rng.normal(size=(n, 3)) * [50, 50, 5]).astype(np.float32)
+    rad, prom = np.full(n, 0.02, np.float32), rng.random(n).astype(np.float32)
+    serial = lod.build_tree(pos, rad, prom, max_splats=1000)
+    ref = lod.TreeInput.from_splats(pos, rad, prom)
+    shared = lod.TreeInput(shared_empty((3, n), np.float32), shared_empty(n, np.float32),
+                           shared_empty(n, np.float32), shared_empty(n, np.int32))
+    for dst, src in ((shared.pos, ref.pos), (shared.radius, ref.radius),
+                     (shared.key, ref.key), (shared.perm, ref.perm)):
+        dst[:] = src
+    build_mod._JOB = build_mod._Job(None, None, None, shared, 3, 3, 1)
+    try:
+        with pool(2) as imap:
+            par = build_mod._build_tree(shared, imap, 2, 1000, None)
+    finally:
+        build_mod._JOB = None
+
+    def nodes(root):
+        return {nd.name: (nd.index.tolist(), nd.lo.tolist(), nd.hi.tolist()) for nd in root.walk()}
+    assert max(nd.level for nd in par.walk()) >= 3
+    assert nodes(par) == nodes(serial)

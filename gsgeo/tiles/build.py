@@ -211,21 +211,50 @@ def _quantise_block(task: tuple[int, int]) -> tuple[int, int, float]:
         t.radius[start:end] = lod.splat_radius(q.scales)
         t.key[start:end] = lod.importance(q.alphas, q.scales) * lod.tie_breaker(
             np.arange(start, end, dtype=np.int64))
+        t.perm[start:end] = np.arange(start, end, dtype=np.int32)
         extent = float(np.abs(q.positions).max())
     return start, m, extent
 
 
-def _write_tile(task: tuple[str, np.ndarray, int, str]) -> int:
-    """Pack, compress and write one tile; returns its number of splats."""
-    name, index, frac, folder = task
+def _grow_subtree(task: tuple[lod.Node, int, int, int, int]) -> lod.Node:
+    """Grow the subtree of a node over the shared tree input's range [a, b) in place."""
+    node, a, b, max_splats, parent_splats = task
+    return lod.grow(_JOB.tree, node, a, b, max_splats, parent_splats)
+
+
+def _write_tile(task: tuple[str, int, int, int, str]) -> int:
+    """Pack, compress and write one tile (its splats: held rows tree.perm[start:stop],
+    sorted, so the gather is near-sequential); returns its number of splats."""
+    name, start, stop, frac, folder = task
     job = _JOB
-    b = job.held.take(index)   # sorted indices: a near-sequential gather
+    b = job.held.take(job.tree.perm[start:stop])
     blob, lo, hi = spz.pack_bounded(b, job.sh_degree, version=job.spz_version,
                                     fractional_bits=frac, level=job.level)
     data = gltf.tile_glb(blob, b.count, job.sh_degree, lo, hi)
     with open(os.path.join(folder, f"{name}.glb"), "wb") as f:
         f.write(data)
     return b.count
+
+
+def _build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,
+                parent_splats: int | None) -> lod.Node:
+    """The tile tree: the top levels expanded here until there are subtrees enough to keep
+    the workers busy, those grown by the workers (on disjoint ranges of the shared input)."""
+    max_splats, parent_splats = lod.tree_limits(max_splats, parent_splats)
+    root = lod.root_node(tree)
+    frontier = [(root, 0, tree.perm.shape[0])]
+    while frontier and len(frontier) < 2 * nproc:
+        big = max(range(len(frontier)), key=lambda i: frontier[i][2] - frontier[i][1])
+        if frontier[big][2] - frontier[big][1] <= max_splats:
+            break
+        frontier += lod.expand(tree, *frontier.pop(big), max_splats, parent_splats)
+    by_name = {nd.name: nd for nd, _, _ in frontier}
+    tasks = [(nd, a, b, max_splats, parent_splats) for nd, a, b in frontier]
+    for grown in imap(_grow_subtree, tasks):
+        nd = by_name[grown.name]     # the worker's copy: take its subtree and range
+        nd.children, nd.start, nd.stop = grown.children, grown.start, grown.stop
+    lod.attach_indices(tree, root)
+    return root
 
 
 def _held_arrays(count: int, sh_degree: int, spz_version: int) -> spz.SpzBytes:
@@ -280,7 +309,7 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
         held = _held_arrays(count, sh_degree, spz_version)
         tree = lod.TreeInput(shared_empty((3, count), np.float32),
                              shared_empty(count, np.float32), shared_empty(count, np.float32),
-                             np.arange(count, dtype=np.int32))
+                             shared_empty(count, np.int32))
         _JOB = _Job(src, placement, held, tree, spz_version, sh_degree, level)
         with pool(nproc) as imap:
             bar = Progress(progress, count, "reading")
@@ -297,22 +326,25 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
             dropped = count - n
             if n == 0:
                 raise InputError(f"{src_path}: every splat has NaN or infinite values")
-            if n < count:   # rows of dropped splats are left out of the tree
+            if n < count:
+                # rows of dropped splats are left out of the tree: the kept ones move to
+                # the front, in place (the workers see the same shared memory)
                 rows = np.concatenate([np.arange(a, a + m, dtype=np.int32) for a, m in kept])
-                tree = lod.TreeInput(np.take(tree.pos, rows, axis=1), tree.radius[rows],
-                                     tree.key[rows], rows)
+                for arr in (*tree.pos, tree.radius, tree.key, tree.perm):
+                    arr[:n] = arr[rows]
+                tree = lod.TreeInput(tree.pos[:, :n], tree.radius[:n], tree.key[:n],
+                                     tree.perm[:n])
             frac = spz.fractional_bits_for(extent)
             if frac < spz.DEFAULT_FRACTIONAL_BITS:
                 georef.warnings.append(
                     f"the scene reaches {extent:.0f} m from its centre: SPZ positions use "
                     f"{frac} fractional bits ({1000 / 2 ** frac:.2f} mm steps) instead of 12")
-            root = lod.build_tree_in_place(tree, max_splats=max_splats,
-                                           parent_splats=parent_splats)
+            root = _build_tree(tree, imap, nproc, max_splats, parent_splats)
             nodes = [nd for nd in root.walk() if nd.index.shape[0]]
             (tmp / "tiles").mkdir()
             bar = Progress(progress, n, "writing")
             # biggest first so the last tiles to finish are small
-            tasks = [(nd.name, nd.index, frac, str(tmp / "tiles"))
+            tasks = [(nd.name, nd.start, nd.stop, frac, str(tmp / "tiles"))
                      for nd in sorted(nodes, key=lambda nd: -nd.index.shape[0])]
             for done in imap(_write_tile, tasks):
                 bar.update(done)

@@ -32,6 +32,8 @@ class Node:
     level: int
     name: str
     children: list[Node] = field(default_factory=list)
+    start: int = 0                    # the tile's splats are TreeInput.perm[start:stop]
+    stop: int = 0
 
     @property
     def geometric_error(self) -> float:
@@ -137,30 +139,62 @@ def build_tree(pos: np.ndarray, radius: np.ndarray, prominence: np.ndarray, *,
 def build_tree_in_place(w: TreeInput, *, max_splats: int = 131_072,
                         parent_splats: int | None = None) -> Node:
     """The tile tree over ``w``, whose arrays are permuted in place: a level of the tree
-    costs a few passes over N, not a gather of every node's subset. Node indices are values
-    of ``w.perm``, sorted."""
+    costs a few passes over N, not a gather of every node's subset. Each node's ``index``
+    is ``w.perm[start:stop]``, sorted."""
+    max_splats, parent_splats = tree_limits(max_splats, parent_splats)
+    root = root_node(w)
+    grow(w, root, 0, w.perm.shape[0], max_splats, parent_splats)
+    attach_indices(w, root)
+    return root
+
+
+def tree_limits(max_splats: int, parent_splats: int | None) -> tuple[int, int]:
     if max_splats < 1:
         raise ValueError("max_splats must be positive")
     if parent_splats is None:
         parent_splats = max(1, max_splats // 4)
-    parent_splats = min(parent_splats, max_splats)
+    return max_splats, min(parent_splats, max_splats)
+
+
+def root_node(w: TreeInput) -> Node:
     n = w.perm.shape[0]
     lo, hi = w.box(0, n) if n else (np.zeros(3), np.zeros(3))
-    root = Node(w.perm[:0], lo, hi, 0, "0")
-    stack = [(root, 0, n)]
+    return Node(w.perm[:0], lo, hi, 0, "0")
+
+
+def expand(w: TreeInput, node: Node, a: int, b: int, max_splats: int,
+           parent_splats: int) -> list[tuple[Node, int, int]]:
+    """Make ``node`` (splats [a, b) of ``w``) a leaf, or a parent keeping the most prominent
+    splats with children for the rest; returns the children still to expand. Only the
+    range [a, b) of ``w`` is touched, so disjoint ranges may be expanded concurrently."""
+    if b - a <= max_splats:
+        w.perm[a:b].sort()
+        node.start, node.stop = a, b
+        return []
+    parts = w.partition(a, b, parent_splats)
+    w.perm[a:a + parent_splats].sort()
+    node.start, node.stop = a, a + parent_splats
+    out = []
+    for i, (clo, chi) in enumerate(parts):
+        blo, bhi = w.box(clo, chi)
+        child = Node(w.perm[:0], blo, bhi, node.level + 1, f"{node.name}_{i}")
+        node.children.append(child)
+        out.append((child, clo, chi))
+    return out
+
+
+def grow(w: TreeInput, node: Node, a: int, b: int, max_splats: int, parent_splats: int) -> Node:
+    """Expand ``node`` over [a, b) down to the leaves."""
+    stack = [(node, a, b)]
     while stack:
-        node, a, b = stack.pop()
-        if b - a <= max_splats:
-            node.index = np.sort(w.perm[a:b])
-            continue
-        parts = w.partition(a, b, parent_splats)
-        node.index = np.sort(w.perm[a:a + parent_splats])
-        for i, (clo, chi) in enumerate(parts):
-            blo, bhi = w.box(clo, chi)
-            child = Node(w.perm[:0], blo, bhi, node.level + 1, f"{node.name}_{i}")
-            node.children.append(child)
-            stack.append((child, clo, chi))
-    return root
+        stack += expand(w, *stack.pop(), max_splats, parent_splats)
+    return node
+
+
+def attach_indices(w: TreeInput, root: Node) -> None:
+    """Set every node's ``index`` to its (sorted) slice of ``w.perm``."""
+    for nd in root.walk():
+        nd.index = w.perm[nd.start:nd.stop]
 
 
 def splat_radius(scales_u8: np.ndarray) -> np.ndarray:
