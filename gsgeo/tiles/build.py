@@ -191,11 +191,17 @@ class _Job:
 _JOB: _Job | None = None
 
 
-def _quantise_block(task: tuple[int, int]) -> tuple[int, int, float]:
+def _quantise_blocks(task: tuple[int, int, int]) -> list[tuple[int, int, float]]:
+    """:func:`_quantise_block` over [start, stop) in blocks of ``block`` splats (one task
+    holds several blocks: fewer messages between the processes, smaller temporaries)."""
+    start, stop, block = task
+    return [_quantise_block(a, min(stop, a + block)) for a in range(start, stop, block)]
+
+
+def _quantise_block(start: int, stop: int) -> tuple[int, int, float]:
     """Read splats [start, stop), drop non-finite ones, turn them into the root frame and
     quantise them into held rows [start, start + kept), with the tree's inputs. Returns
     (start, kept, largest |coordinate| in metres)."""
-    start, stop = task
     job = _JOB
     s = job.source.read(start, stop)
     ok = s.finite_mask()
@@ -315,11 +321,14 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
             bar = Progress(progress, count, "reading")
             kept: list[tuple[int, int]] = []
             extent = 0.0
-            blocks = [(i, min(count, i + block)) for i in range(0, count, block)]
-            for start, m, ext in imap(_quantise_block, blocks):
-                kept.append((start, m))
-                extent = max(extent, ext)
-                bar.update(min(count, start + block) - start)
+            # about eight tasks per worker, each a few blocks
+            step = block * min(8, max(1, count // (8 * nproc * block)))
+            tasks = [(i, min(count, i + step), block) for i in range(0, count, step)]
+            for done in imap(_quantise_blocks, tasks):
+                for start, m, ext in done:
+                    kept.append((start, m))
+                    extent = max(extent, ext)
+                    bar.update(min(count, start + block) - start)
             bar.close()
             kept.sort()
             n = sum(m for _, m in kept)
