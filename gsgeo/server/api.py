@@ -2,18 +2,20 @@
 
 Endpoints are plain (sync) functions: FastAPI runs them in its thread pool, so the event loop
 keeps parsing and answering (static files, other requests) while numpy and PROJ work, and
-each store call is one SQLite transaction. (POST /intersect on the event loop measured at
-about half the saturation throughput on the 2-core machine.)
+each store call is one SQLite transaction. POST /intersect, the one the viewer calls at every
+click, runs on the server's long-lived solver threads instead (gsgeo.server.solver: warm PROJ
+objects), and never on the event loop itself (a solve there stalls every other request, and
+the latency tail with it when the machine is busy).
 """
 
 from __future__ import annotations
 
-import json
 import shutil
 import tempfile
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import orjson
 from fastapi import APIRouter, Body, File, Form, Query, Request, Response, UploadFile
 from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
@@ -25,7 +27,7 @@ from gsgeo.server.scenes import list_scenes
 from gsgeo.store import FeatureRecord, PointRecord, Project, Projects
 from gsgeo.store.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
 from gsgeo.store.projects import validate_settings
-from gsgeo.store.solving import check_excluded, json_ready, measure, session_point
+from gsgeo.store.solving import check_excluded, measure, session_point
 
 
 class ErrorBody(m.BaseModel):
@@ -55,9 +57,13 @@ EXPORT_TYPES = {"gpkg": "application/geopackage+sqlite3", "geojson": "applicatio
 
 
 def fast_json(obj: Any, status_code: int = 200) -> Response:
-    """JSON straight from plain dicts/lists/floats (skips FastAPI's slower generic encoder)."""
-    body = json.dumps(obj, allow_nan=False, separators=(",", ":"), ensure_ascii=False)
-    return Response(body.encode(), status_code=status_code, media_type="application/json")
+    """JSON (UTF-8) of plain dicts, lists, numbers and numpy values, through orjson.
+
+    Skips FastAPI's generic encoder. NaN and infinities become null, as ``json_ready`` makes
+    them (JSON has no NaN).
+    """
+    body = orjson.dumps(obj, option=orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
+    return Response(body, status_code=status_code, media_type="application/json")
 
 
 def svc(request: Request) -> Projects:
@@ -94,17 +100,31 @@ def info(request: Request) -> dict[str, Any]:
 
 
 @router.post("/intersect", summary="Intersect one point's rays (stateless)")
-def intersect(body: m.IntersectRequest, request: Request) -> dict[str, Any]:
+async def intersect(body: m.IntersectRequest, request: Request) -> dict[str, Any]:
     """One point's rays (session-JSON shape) and solving options -> the solved point:
     grid coordinates and covariance (when ``crs`` is given), WGS 84 position, sigma0,
     residuals per ray, outlier flags and warnings (gsgeo.crs.pipeline ``to_dict``)."""
+    state = request.app.state
+    return await state.solver.run(solve_intersect, body, state.config.data_dir)
+
+
+def warm_solve() -> None:
+    """A solve of two synthetic rays (no grid CRS): imports the pipeline and builds the PROJ
+    objects every request needs on the calling thread."""
+    up = [3978000.0, -8700.0, 4968000.0]  # ECEF, metres: near London, ~50 m up
+    rays = [{"origin": [up[0] + 30.0 * k, up[1], up[2] + 40.0], "direction": [-k, 0.0, -1.0]}
+            for k in (1, -1)]
+    measure(session_point("warm-up", rays), {"source_crs": "EPSG:4978"}, [], None).to_dict()
+
+
+def solve_intersect(body: m.IntersectRequest, data_dir: Path) -> Response:
+    """The work of POST /intersect, on a solver thread (gsgeo.server.solver)."""
     rays = [r.model_dump(exclude_none=True) for r in body.rays]
     sp = session_point(body.id, rays, body.code, body.description)
     excluded = check_excluded(body.exclude, len(rays), "exclude")
-    data_dir = request.app.state.config.data_dir
     settings = validate_settings(
         body.model_dump(include={"crs", "vertical", "geoid", "source_crs", "sigma_px"}), data_dir)
-    return fast_json(json_ready(measure(sp, settings, excluded, data_dir).to_dict()))
+    return fast_json(measure(sp, settings, excluded, data_dir).to_dict())
 
 
 @router.get("/crs", summary="Search coordinate reference systems by name, area or code")

@@ -23,6 +23,7 @@ from gsgeo import __version__
 from gsgeo.errors import GsgeoError
 from gsgeo.server.files import file_response
 from gsgeo.server.guard import BodyTooLarge, Guard, MiB
+from gsgeo.server.solver import SolverPool
 from gsgeo.store import ConflictError, NotFoundError, Projects, StoreError, open_store
 
 log = logging.getLogger("gsgeo.server")
@@ -43,6 +44,7 @@ class ServerConfig:
     cesium_dir: Path | None = None  # default: web/node_modules/cesium/Build/Cesium
     max_body: int = 4 * MiB
     max_upload: int = 64 * MiB
+    solver_threads: int = 1  # long-lived threads for POST /api/intersect (gsgeo.server.solver)
     allowed_hosts: set[str] | None = field(default=None)  # None: derived from host
 
     def __post_init__(self) -> None:
@@ -160,10 +162,15 @@ The API is at <a href="/docs">/docs</a>; scenes are listed at
 def create_app(config: ServerConfig, store=None) -> FastAPI:
     """The application; ``store`` defaults to the SQLite store of ``config.data_dir``."""
     store = store or open_store(config.data_dir)
+    solver = SolverPool(config.solver_threads)
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI):
+        from gsgeo.server.api import warm_solve
+
+        await solver.warm_up(warm_solve)
         yield
+        solver.close()
         store.close()
 
     app = FastAPI(title="gsgeo", version=__version__, lifespan=lifespan,
@@ -171,6 +178,7 @@ def create_app(config: ServerConfig, store=None) -> FastAPI:
                               "Splatting scenes. Rays in, grid coordinates with covariance out.")
     app.state.config = config
     app.state.store = store
+    app.state.solver = solver
     app.state.projects = Projects(store, config.data_dir)
     _install_error_handlers(app)
 
@@ -225,6 +233,7 @@ def config_to_env(config: ServerConfig) -> str:
                        "port": config.port, "token": config.token,
                        "web_dir": str(config.web_dir), "cesium_dir": str(config.cesium_dir),
                        "max_body": config.max_body, "max_upload": config.max_upload,
+                       "solver_threads": config.solver_threads,
                        "allowed_hosts": sorted(config.allowed_hosts)
                        if config.allowed_hosts is not None else None})
 
