@@ -18,7 +18,7 @@ from gsgeo.tiles.splats import Splats
 
 #: The scene centre (origin of the root ENU frame) is the centre of the bounding box of this
 #: many splat centres spread through the file; the true extent is checked after reading.
-CENTRE_SAMPLE = 65_536
+CENTRE_SAMPLE = 16_384
 
 
 class Source:
