@@ -113,9 +113,10 @@ GRID_FLOATS = ("easting", "northing", "height", "sigma_e", "sigma_n", "sigma_h",
 GRID_TEXTS = ("height_type", "vertical_datum", "crs", "operation")
 
 
-def _fields(objs: list, names: tuple[str, ...]) -> list[tuple]:
-    """The attributes `names` (two or more) of every object, one tuple per name."""
-    return list(zip(*map(attrgetter(*names), objs), strict=True))
+def _fields(objs: list, names: tuple[str, ...]) -> list[list]:
+    """The attributes `names` of every object, one list per name (no tuple per object: the
+    garbage collector would walk them)."""
+    return [list(map(attrgetter(k), objs)) for k in names]
 
 
 def _floats(objs: list, names: tuple[str, ...]) -> np.ndarray:
@@ -138,7 +139,7 @@ def _measurement_columns(ms: list) -> dict[str, Any] | None:
 
     Gives exactly what Measurement.record() gives (the export tests compare the two), with
     each attribute gathered in one pass over all points and the per-point numpy reductions
-    done once. Float columns come back as float64 arrays, text columns as tuples. None when
+    done once. Float columns come back as float64 arrays, text columns as lists. None when
     an object is not a Measurement with a grid point and covariance (the caller then uses
     record()).
     """
@@ -357,27 +358,25 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
 
 def _measurement_rays(ms: list):
     """`_rays` for many Measurement objects at once: (owners, counts, origins, px, m, out, exc)."""
-    org = [m.ray_origins_grid for m in ms]
+    org, px, rm, out, exc = _fields(
+        ms, ("ray_origins_grid", "residuals_px", "residuals_m", "outliers", "excluded"))
     if type(None) not in set(map(type, org)):
-        have, sel = np.arange(len(ms)), ms
+        have = np.arange(len(ms))
     else:
         have = np.array([i for i, o in enumerate(org) if o is not None], dtype=np.int64)
         if not have.size:
             return None
-        sel = [ms[i] for i in have]
-        org = [org[i] for i in have]
+        org, px, rm, out, exc = ([v[i] for i in have] for v in (org, px, rm, out, exc))
     counts = np.fromiter(map(len, org), dtype=np.int64, count=len(org))
 
-    def cat(name, fill):
-        vals = [getattr(m, name) for m in sel]
+    def cat(vals, fill):
         if type(None) not in set(map(type, vals)):
             return np.concatenate(vals)
         return np.concatenate([np.full(c, fill) if v is None else np.asarray(v)
                                for v, c in zip(vals, counts, strict=True)])
 
-    return (have, counts, np.concatenate(org), cat("residuals_px", math.nan),
-            cat("residuals_m", math.nan), cat("outliers", False).astype(bool),
-            np.concatenate([m.excluded for m in sel]).astype(bool))
+    return (have, counts, np.concatenate(org), cat(px, math.nan), cat(rm, math.nan),
+            cat(out, False).astype(bool), np.concatenate(exc).astype(bool))
 
 
 def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str]) -> None:
