@@ -146,3 +146,31 @@ def reference_geojson(data, grid: bool = False) -> dict:
             f"coordinates in {data.crs} in the properties.")
     doc["features"] = feats
     return json.loads(json.dumps(doc, allow_nan=False))
+
+
+def reference_csv(data) -> str:
+    """The CSV of an ExportData's points written with the csv module, as the first writer did:
+    repr() for full-precision floats, %-format for fixed decimals, empty for None and NaN
+    (rows end in CRLF here so that csv.writer quotes a carriage return inside a field)."""
+    import csv
+    import io
+
+    from gsgeo.export.csvfile import CSV_COLUMNS, FIXED_DECIMALS
+
+    t = data.points
+    cols = []
+    for k in CSV_COLUMNS:
+        kind = t.types[k]
+        if kind == "str":
+            cols.append(["" if v is None else v for v in t.columns[k]])
+        elif kind == "int":
+            cols.append([str(v) for v in np.asarray(t.columns[k]).tolist()])
+        else:
+            fmt = f"%.{FIXED_DECIMALS[k]}f" if k in FIXED_DECIMALS else None
+            cols.append(["" if not np.isfinite(v) else (fmt % v if fmt else repr(v))
+                         for v in np.asarray(t.columns[k], dtype=float).tolist()])
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf, lineterminator="\r\n")  # "\r" in a field is quoted only then
+    w.writerow(CSV_COLUMNS)
+    w.writerows(zip(*cols, strict=True))
+    return buf.getvalue()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import io
 import json
 import math
 from pathlib import Path
@@ -382,6 +383,40 @@ def test_csv_round_trip(odn, tmp_path):
 # Errors and atomicity -------------------------------------------------------------------------
 def _files(d: Path) -> list[str]:
     return sorted(p.name for p in d.iterdir())
+
+
+@pytest.mark.parametrize("chunk", [10000, 2])
+def test_csv_text_equals_the_csv_module_output(odn, tmp_path, monkeypatch, chunk):
+    """Cell by cell the CSV is what csv.writer writes (export_helpers.reference_csv): the same
+    text, quoting and empty cells; full-precision floats the same numbers (1e-05 or 1e-5)."""
+    from export_helpers import reference_csv
+
+    import gsgeo.export.csvfile as cf
+    from gsgeo.export.tables import collect
+
+    monkeypatch.setattr(cf, "CHUNK", chunk)
+    _, res = odn
+    res = list(res)
+    for k, text in enumerate(['a,"b"', "line\nbreak", "cr\rhere", '"', " spaced ", "ü,角"]):
+        res[k] = copy.copy(res[k])
+        res[k].description = text
+    data = collect(res, map_layers=False)
+    data.points.columns["sigma0"][0] = 1.5e-7  # exponent form
+    data.points.columns["lon"][1] = np.nan
+    out = tmp_path / "x.csv"
+    cf.write_csv(out, data)
+    got = list(csv.reader(out.open(encoding="utf-8", newline="")))
+    want = list(csv.reader(io.StringIO(reference_csv(data), newline="")))
+    assert len(got) == len(want) == 7 and got[0] == want[0]
+    for g, w in zip(got[1:], want[1:], strict=True):
+        for k, a, b in zip(CSV_COLUMNS, g, w, strict=True):
+            if POINT_TYPES[k] == "float" and b:
+                assert float(a) == float(b), k
+            else:
+                assert a == b, k
+    assert got[1][CSV_COLUMNS.index("lon")] != "" and got[2][CSV_COLUMNS.index("lon")] == ""
+    assert [r[CSV_COLUMNS.index("description")] for r in got[1:]][:6] == [
+        'a,"b"', "line\nbreak", "cr\rhere", '"', " spaced ", "ü,角"]
 
 
 def test_empty_and_unsolved(tmp_path):
