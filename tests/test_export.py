@@ -595,3 +595,24 @@ def test_text_fields_with_unicode_commas_quotes_and_newlines(tmp_path, rng):
     assert gj["features"][0]["id"] == "Pünkt 1" and gj["features"][0]["properties"]["description"] == want
     df = pyogrio.read_dataframe(write_measurements(tmp_path / "t.gpkg", res), layer="points")
     assert df.point_id[0] == "Pünkt 1" and df.description[0] == want
+
+
+def test_gpkg_without_arrow_write_is_the_same(bng, tmp_path, monkeypatch):
+    """With a GDAL older than 3.8 (no Arrow write) layers go feature by feature: same content."""
+    import sqlite3
+
+    import gsgeo.export.gpkg as gp
+
+    s, res = bng
+    cps = [{"id": "P1", "easting": 1.0, "northing": 2.0}]
+    a = write_measurements(tmp_path / "a.gpkg", res, lines=s.lines, polygons=s.polygons, check_points=cps)
+    monkeypatch.setattr(gp, "arrow_write_available", lambda: False)
+    b = write_measurements(tmp_path / "b.gpkg", res, lines=s.lines, polygons=s.polygons, check_points=cps)
+    with sqlite3.connect(a) as ca, sqlite3.connect(b) as cb:
+        tables = [r[0] for r in ca.execute("SELECT name FROM sqlite_master WHERE type = 'table'")]
+        assert len(tables) > 20
+        for sql in ["SELECT type, name, sql FROM sqlite_master ORDER BY name"] + [
+                f'SELECT * FROM "{t}"' for t in tables if t != "gpkg_contents"]:
+            assert ca.execute(sql).fetchall() == cb.execute(sql).fetchall(), sql
+        sql = "SELECT table_name, description, min_x, max_y, srs_id FROM gpkg_contents ORDER BY 1"
+        assert ca.execute(sql).fetchall() == cb.execute(sql).fetchall()

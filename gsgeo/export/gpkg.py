@@ -37,18 +37,39 @@ def gpkg_crs(text: str) -> tuple[str, dict[str, str]]:
     return crs.to_wkt(), {"CRS_WKT_EXTENSION": "YES"}
 
 
+def arrow_write_available() -> bool:
+    """pyogrio's Arrow write path needs GDAL >= 3.8 (pyogrio's wheels bring a newer one)."""
+    import pyogrio
+
+    return tuple(pyogrio.__gdal_version__) >= (3, 8, 0)
+
+
 def _write_layer(path: Path, name: str, geometry: tuple[np.ndarray, np.ndarray], table: Table,
                  geometry_type: str, crs: str, append: bool, description: str) -> None:
-    """One layer through pyogrio's Arrow path: GDAL inserts the whole batch in C."""
-    from pyogrio.raw import write_arrow
+    """One layer: through pyogrio's Arrow path (GDAL inserts the whole batch in C) where GDAL
+    has it, else feature by feature with pyogrio's `write`; the files are the same."""
+    from pyogrio.raw import write, write_arrow
 
     crs_text, ds_opts = gpkg_crs(crs)
+    common = {"layer": name, "driver": "GPKG", "geometry_type": geometry_type, "crs": crs_text,
+              "append": append, "dataset_options": None if append else (ds_opts or None),
+              "layer_options": {"DESCRIPTION": description}}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        write_arrow(table_stream(geometry, table), str(path), layer=name, driver="GPKG",
-                    geometry_name=GEOMETRY, geometry_type=geometry_type, crs=crs_text,
-                    append=append, dataset_options=None if append else (ds_opts or None),
-                    layer_options={"DESCRIPTION": description})
+        if arrow_write_available():
+            write_arrow(table_stream(geometry, table), str(path), geometry_name=GEOMETRY, **common)
+        else:
+            offsets, data = geometry
+            wkb_items = np.array([data[a:b].tobytes() for a, b in
+                                  zip(offsets[:-1].tolist(), offsets[1:].tolist(), strict=True)],
+                                 dtype=object)
+            write(str(path), wkb_items, *_raw_fields(table), nan_as_null=True, **common)
+
+
+def _raw_fields(table: Table) -> tuple[list[np.ndarray], list[str]]:
+    kinds = {"str": object, "int": np.int32, "bool": bool, "float": np.float64}
+    data = [np.asarray(col, dtype=kinds[table.types[k]]) for k, col in table.columns.items()]
+    return data, list(table.columns)
 
 
 def write_gpkg(path: Path, data: ExportData) -> None:
