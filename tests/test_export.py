@@ -616,3 +616,22 @@ def test_gpkg_without_arrow_write_is_the_same(bng, tmp_path, monkeypatch):
             assert ca.execute(sql).fetchall() == cb.execute(sql).fetchall(), sql
         sql = "SELECT table_name, description, min_x, max_y, srs_id FROM gpkg_contents ORDER BY 1"
         assert ca.execute(sql).fetchall() == cb.execute(sql).fetchall()
+
+
+@pytest.mark.parametrize("suffix", [".gpkg", ".geojson", ".csv"])
+def test_text_that_is_not_unicode_is_a_clear_error(bng, tmp_path, suffix):
+    """JSON input can carry a lone surrogate ("\\ud800"); no format can store it: InputError
+    naming the point and the field, and no file."""
+    s, res = bng
+    res = list(res)
+    res[1] = copy.copy(res[1])
+    res[1].description = "bad \ud800 text"
+    with pytest.raises(InputError, match=f"points '{res[1].point_id}': description is not valid Unicode"):
+        write_measurements(tmp_path / f"x{suffix}", res)
+    res[1].point_id = "P\udc80"
+    with pytest.raises(InputError, match=r"points\[1\]: point_id is not valid Unicode"):
+        write_measurements(tmp_path / f"x{suffix}", res)
+    with pytest.raises(InputError, match=r"lines\[0\]: line_id is not valid Unicode"):
+        write_measurements(tmp_path / f"x{suffix}", res[2:],
+                           lines=[{"id": "L\ud800", "points": ["P3", "P4"]}])
+    assert list(tmp_path.iterdir()) == []

@@ -353,7 +353,38 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
                                         np.nan_to_num(cols["ellipse_bearing_deg"][sel]),
                                         g.unit_factor)
     _collect_check_points(data, check_points, index, xyz, g)
+    for layer in ("points", "lines", "polygons", "check_points"):
+        if getattr(data, layer) is not None:
+            _check_text(layer, getattr(data, layer))
     return data
+
+
+def _check_text(layer: str, table: Table) -> None:
+    """Every text value can be written as UTF-8 (JSON input can hold lone surrogates such as
+    "\\ud800", which no export format can store)."""
+
+    def ok(v) -> bool:
+        try:
+            str(v).encode("utf-8")
+        except UnicodeEncodeError:
+            return False
+        return True
+
+    for name, kind in table.types.items():
+        if kind != "str":
+            continue
+        col = table.columns[name]
+        try:
+            text = "".join(col)
+        except TypeError:  # None (unknown) or a non-str value
+            text = "".join(["" if v is None else str(v) for v in col])
+        if ok(text):
+            continue
+        k = next(k for k, v in enumerate(col) if not ok(v))
+        ident = table.columns[next(iter(table.columns))][k]
+        where = f"{layer} '{ident}'" if ok(ident) else f"{layer}[{k}]"
+        raise InputError(f"{where}: {name} is not valid Unicode text (a lone surrogate such as "
+                         "\\ud800)")
 
 
 def _measurement_rays(ms: list):
