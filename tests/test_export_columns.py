@@ -60,6 +60,9 @@ def test_arrow_columns_hold_values_and_nulls():
     assert _values(column("s", text, "str")) == text.tolist()
     assert _values(column("s", np.array(["a", "b"], dtype=object), "str")) == ["a", "b"]
     assert _values(column("s", np.array([7, None], dtype=object), "str")) == ["7", None]
+    assert _values(column("s", np.array([None, None], dtype=object), "str")) == [None, None]
+    assert _values(column("x", np.array([np.nan, np.nan]), "float")) == [None, None]
+    assert _values(column("x", np.array([]), "float")) == []
     with pytest.raises(InputError, match="column s"):
         column("s", np.array(["bad \udc80"], dtype=object), "str")
 
