@@ -10,7 +10,7 @@ Inputs (written to benchmarks/out/, git-ignored):
   Without the shared data, random splats are used instead (and the table says so).
 
 Each tool runs as a separate process under /usr/bin/time: wall time, splats/s, CPU time,
-peak memory against the bound 1.5 x input + 300 MB (sampled every 20 ms as the sum of the
+peak memory against the bound 1.5 x input + 300 MB (sampled every 0.1 s as the sum of the
 proportional set sizes of the tool's whole process tree, gsgeo's worker processes included;
 /usr/bin/time's maximum RSS of the largest single process is shown beside it), output size.
 gsgeo runs with its defaults (gzip level 1 through ISA-L, one worker process per CPU,
@@ -127,7 +127,8 @@ def _pss_mb(pids: list[int]) -> float:
 
 def timed(cmd: list[str], cwd: Path | None = None) -> dict:
     """Run cmd under /usr/bin/time; also sample the memory of its whole process tree (worker
-    processes included) every 20 ms: /usr/bin/time's maximum RSS is that of the single
+    processes included) every 0.1 s (reading smaps_rollup walks page tables: more often slows
+    the tool measured): /usr/bin/time's maximum RSS is that of the single
     largest process, which understates a multi-process tool."""
     tf = OUT / "time.txt"
     t0 = time.monotonic()
@@ -136,7 +137,7 @@ def timed(cmd: list[str], cwd: Path | None = None) -> dict:
     peak = 0.0
     while proc.poll() is None:
         peak = max(peak, _pss_mb(_descendants(proc.pid)[1:]))   # not /usr/bin/time itself
-        time.sleep(0.02)
+        time.sleep(0.1)
     out, err = proc.communicate()
     wall = time.monotonic() - t0
     if proc.returncode != 0:
