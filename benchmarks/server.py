@@ -283,6 +283,7 @@ def main() -> int:
                     help="mean think time between an operator's requests, s")
     ap.add_argument("--seconds", type=float, default=10.0, help="tile throughput duration")
     ap.add_argument("--workers", type=int, default=1, help="gsgeo serve --workers")
+    ap.add_argument("--solver-threads", type=int, default=1, help="gsgeo serve --solver-threads")
     ap.add_argument("--client-procs", type=int, default=2,
                     help="client processes the intersect clients are spread over")
     ap.add_argument("--loads", nargs="+", default=["one", "operators", "saturation"],
@@ -300,6 +301,7 @@ def main() -> int:
                "--port", str(port)]
         if args.workers > 1:
             cmd += ["--workers", str(args.workers)]
+        cmd += ["--solver-threads", str(args.solver_threads)]
         gs = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                               text=True)
         procs.append(gs)
@@ -313,7 +315,8 @@ def main() -> int:
 
         print(f"load average at the start: {os.getloadavg()[0]:.1f} (1 min)", file=sys.stderr)
         results: dict = {"clients": args.clients, "loadavg_start": os.getloadavg()[0], "cpus": os.cpu_count(),
-                         "workers": args.workers, "intersect": {}, "tiles": {}}
+                         "workers": args.workers, "solver_threads": args.solver_threads,
+                         "intersect": {}, "tiles": {}}
         print(f"gsgeo serve on {base} ({args.workers} worker(s)); {os.cpu_count()} CPUs",
               file=sys.stderr)
         runs = (("one client", 1, 200, 0.0), ("operators", args.clients, args.requests, args.think),

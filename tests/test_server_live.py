@@ -158,3 +158,46 @@ def test_points_are_spread_over_distinct_positions():
                    for k in range(POINTS_PER_CLIENT)])
     d = np.linalg.norm(xy[:, None] - xy[None], axis=-1) + np.eye(len(xy)) * 1e9
     assert d.min() > 5.0
+
+
+def test_two_workers_with_two_solver_threads_share_the_store(tmp_path):
+    """`--workers 2 --solver-threads 2`: every answer right, every point in the one store."""
+    proc, base = start_server(tmp_path / "data", "--workers", "2", "--solver-threads", "2",
+                              timeout=60)
+    try:
+        pid = httpx.post(f"{base}/api/projects",
+                         json={"name": "two", "crs": "EPSG:32630"}).json()["id"]
+
+        def client(c: int) -> list[str]:
+            ids = []
+            with httpx.Client(base_url=base, timeout=60) as h:
+                for k in range(5):
+                    t = target(c, k)
+                    r = h.post("/api/intersect", json={"rays": rays_at(ecef_of(*t), 3),
+                                                       "crs": "EPSG:32630"})
+                    assert r.status_code == 200, r.text
+                    e, n = UTM30.transform(*t[:2])
+                    assert r.json()["easting"] == pytest.approx(e, abs=1e-4)
+                    assert r.json()["northing"] == pytest.approx(n, abs=1e-4)
+                    r = h.post(f"/api/projects/{pid}/points",
+                               json={"rays": rays_at(ecef_of(*t), 3), "id": f"C{c}-{k}"})
+                    assert r.status_code == 201, r.text
+                    ids.append(r.json()["id"])
+            return ids
+
+        with ThreadPoolExecutor(8) as ex:
+            ids = [i for chunk in ex.map(client, range(8)) for i in chunk]
+        pts = httpx.get(f"{base}/api/projects/{pid}/points", timeout=60).json()["points"]
+        assert sorted(p["id"] for p in pts) == sorted(ids) and len(ids) == 40
+    finally:
+        proc.terminate()
+        proc.wait(20)
+
+
+def test_serve_refuses_a_bad_solver_thread_count(tmp_path):
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "gsgeo", "serve", "--data", str(tmp_path),
+                        "--solver-threads", "0"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--solver-threads" in r.stderr

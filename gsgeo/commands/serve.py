@@ -31,6 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=1,
                    help="worker processes (default 1; more use more CPU cores, sharing the "
                         "SQLite store)")
+    p.add_argument("--solver-threads", type=int, default=1, metavar="N",
+                   help="threads (per worker process) that run POST /api/intersect (default 1; "
+                        "they keep their PROJ objects for the server's lifetime)")
     p.add_argument("--log-level", default="warning",
                    choices=["critical", "error", "warning", "info", "debug"])
     p.set_defaults(run=run)
@@ -66,8 +69,12 @@ def run(args: argparse.Namespace) -> int:
     workers = getattr(args, "workers", 1)  # callers such as `gsgeo demo` may leave it out
     if not 1 <= workers <= 64:
         raise InputError(f"--workers must be between 1 and 64, got {workers}")
+    solver_threads = getattr(args, "solver_threads", 1)
+    if not 1 <= solver_threads <= 64:
+        raise InputError(f"--solver-threads must be between 1 and 64, got {solver_threads}")
     config = ServerConfig(data_dir=data, host=args.host, port=args.port, token=token,
-                          web_dir=Path(args.web) if args.web else None)
+                          web_dir=Path(args.web) if args.web else None,
+                          solver_threads=solver_threads)
     app = create_app(config)  # opens (and migrates) the store before accepting requests
     common = {"host": args.host, "port": args.port, "log_level": log_level,
               "server_header": False, "limit_concurrency": 1000, "timeout_keep_alive": 30}
