@@ -1,16 +1,20 @@
 """Benchmark `gsgeo serve` on loopback: POST /api/intersect latency and tile throughput.
 
-    python benchmarks/server.py [--clients 50] [--requests 40] [--think 0.5] [--seconds 10]
+    python benchmarks/server.py [--clients 50] [--requests 40] [--think 2] [--seconds 10]
+        [--workers 1] [--solver-threads 1] [--client-procs 2] [--loads one operators saturation]
 
-1. Intersect latency: 50 concurrent clients (threads with keep-alive httpx clients) each
-   send `--requests` POST /api/intersect requests of a 5-ray point (angular model, output in
-   EPSG:27700). Two load models:
+1. Intersect latency: 50 concurrent clients, each a keep-alive HTTP/1.1 connection of an
+   asyncio client (spread over `--client-procs` processes, so that the clients neither share
+   one GIL nor cost much CPU: raw requests, answers read by Content-Length), each send
+   `--requests` POST /api/intersect requests of a 5-ray point (angular model, output in
+   EPSG:27700). Three load models:
    - "operators": each client waits an exponential think time (mean `--think` s, default 2)
      between requests, like people aiming and clicking (the viewer asks for a live solution
      at every click);
    - "saturation": no think time (closed loop), which measures the server's capacity;
    - "one client": a single client, no think time: the latency floor without queueing.
-   Reported: p50, p90, p99, max latency (ms) and requests/s.
+   Reported: p50, p90, p99, max latency (ms), requests/s, and the server's and the clients'
+   CPU per request.
 2. Tile throughput: the same scene files fetched for `--seconds` by 8 concurrent clients from
    gsgeo serve (/scenes/<name>/...) and from `python -m http.server` on the scene directory,
    in the same run. The scene is ../shared/data/white-sculpture when present, else a
@@ -266,8 +270,9 @@ def plot(results: dict, path: Path) -> None:
     ax.set_xscale("log")
     ax.set_xlabel("POST /api/intersect latency (ms)")
     ax.set_ylabel("fraction of requests")
-    ax.set_title(f"POST /api/intersect on loopback, {results['workers']} "
-                 f"worker(s); load average {results['loadavg_start']:.1f} on {results['cpus']} CPUs",
+    ax.set_title(f"POST /api/intersect on loopback, {results['workers']} worker(s), "
+                 f"{results['solver_threads']} solver thread(s); load average "
+                 f"{results['loadavg_start']:.1f} on {results['cpus']} CPUs",
                  fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
