@@ -244,12 +244,13 @@ def _write_tile(task: tuple[str, int, int, int, str]) -> int:
 
 def _build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,
                 parent_splats: int | None) -> lod.Node:
-    """The tile tree: the top levels expanded here until there are subtrees enough to keep
-    the workers busy, those grown by the workers (on disjoint ranges of the shared input)."""
+    """The tile tree: the top levels expanded here until there is a subtree for each worker
+    (median splits make them equal), those grown by the workers (on disjoint ranges of the
+    shared input)."""
     max_splats, parent_splats = lod.tree_limits(max_splats, parent_splats)
     root = lod.root_node(tree)
     frontier = [(root, 0, tree.perm.shape[0])]
-    while frontier and len(frontier) < 2 * nproc:
+    while frontier and len(frontier) < nproc:
         big = max(range(len(frontier)), key=lambda i: frontier[i][2] - frontier[i][1])
         if frontier[big][2] - frontier[big][1] <= max_splats:
             break
