@@ -173,6 +173,10 @@ def main() -> int:
     st_ok = SPLAT_TRANSFORM.exists() and not args.skip_splat_transform
     if not st_ok and not args.skip_splat_transform:
         _log("splat-transform not installed (cd benchmarks/node && npm ci); skipping it")
+    # gsgeo as installed: its modules byte-compiled, as pip does for a package (this
+    # sandbox sets PYTHONDONTWRITEBYTECODE, which would recompile gsgeo at every start)
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(REPO / "gsgeo")], check=True,
+                   env={k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"})
     rows = []
     for label, path, georef in inputs:
         n = count(path)
