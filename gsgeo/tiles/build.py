@@ -2,9 +2,10 @@
 
 Pipeline: bounds of the input (a sample of the centres) -> scene centre and root ENU frame ->
 blocks of splats turned into the root frame and quantised to SPZ bytes by worker processes
-into shared memory (about 80 bytes a splat at SH degree 3 are held) -> tile tree in the
-parent -> tiles packed, compressed and written by the workers into a temporary directory
-beside OUTDIR, which is renamed into place at the end.
+into shared memory (about 100 bytes a splat at SH degree 3, the tree's inputs included) ->
+tile tree (the top levels in the parent, the subtrees in the workers) -> tiles packed,
+compressed and written by the workers into a temporary directory beside OUTDIR, which is
+renamed into place at the end.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import os
 import shutil
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -189,6 +191,8 @@ class _Job:
 
 
 _JOB: _Job | None = None
+#: One build at a time per process: the workers' state is the module-level _JOB.
+_BUILD_LOCK = threading.Lock()
 
 
 def _quantise_blocks(task: tuple[int, int, int]) -> list[tuple[int, int, float]]:
@@ -283,8 +287,17 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
     ``level`` is the gzip level of the SPZ payloads (1 fastest, 9 smallest); ``workers``
     the number of worker processes (default: the CPUs this process may use; inputs under
     :data:`PARALLEL_MIN_SPLATS` splats are done in this process). The result is written to
-    a temporary directory beside ``outdir`` and renamed into place when complete.
+    a temporary directory beside ``outdir`` and renamed into place when complete. Calls from
+    several threads run one after the other.
     """
+    with _BUILD_LOCK:
+        return _build(input_path, outdir, georef, max_splats=max_splats,
+                      parent_splats=parent_splats, spz_version=spz_version, level=level,
+                      workers=workers, overwrite=overwrite, progress=progress, block=block)
+
+
+def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version, level,
+           workers, overwrite, progress, block) -> Summary:
     global _JOB
     t0 = time.monotonic()
     src_path = Path(input_path)
