@@ -48,6 +48,9 @@ import numpy as np
 from gsgeo.crs.transformers import transformer
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from tests.servertools import rays_at  # noqa: E402  (the rays the API tests use)
+
 SHARED_SCENE = REPO.parent / "shared" / "data" / "white-sculpture"
 
 
@@ -75,17 +78,7 @@ def point_rays(rng: np.random.Generator, n: int = 5) -> list[dict]:
     t = transformer("EPSG:4979", "EPSG:4978")  # cached: not one Transformer per point
     lon, lat = -0.1276 + rng.uniform(-1e-3, 1e-3), 51.5072 + rng.uniform(-1e-3, 1e-3)
     x = np.array(t.transform(lon, lat, 50.0))
-    up = x / np.linalg.norm(x)
-    east = np.cross([0, 0, 1.0], up)
-    east /= np.linalg.norm(east)
-    north = np.cross(up, east)
-    rays = []
-    for k in range(n):
-        az = 2 * np.pi * k / n
-        o = x + 30 * (np.cos(az) * east + np.sin(az) * north) + 20 * up
-        d = (x - o) / np.linalg.norm(x - o) + rng.normal(0, 1e-3, 3)
-        rays.append({"origin": o.tolist(), "direction": d.tolist(), "ifov": 1e-3})
-    return rays
+    return rays_at(x, n, rng, noise_rad=1e-3, ifov=1e-3, radius=30.0, height=20.0)
 
 
 def cpu_seconds(pid: int) -> float:

@@ -159,6 +159,19 @@ def _on_segment(a, b, c) -> np.ndarray:
     return np.all((lo <= c) & (c <= hi), axis=-1)
 
 
+def _edges_touch(a: np.ndarray, b: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Whether edges a[i]-b[i] and a[j]-b[j] touch or cross, for rings (..., N, 2): (..., pairs)."""
+    p1, p2, p3, p4 = a[..., i, :], b[..., i, :], a[..., j, :], b[..., j, :]
+    o1, o2 = _orient(p1, p2, p3), _orient(p1, p2, p4)
+    o3, o4 = _orient(p3, p4, p1), _orient(p3, p4, p2)
+    hit = (o1 * o2 < 0) & (o3 * o4 < 0)
+    hit |= (o1 == 0) & _on_segment(p1, p2, p3)
+    hit |= (o2 == 0) & _on_segment(p1, p2, p4)
+    hit |= (o3 == 0) & _on_segment(p3, p4, p1)
+    hit |= (o4 == 0) & _on_segment(p3, p4, p2)
+    return hit
+
+
 def ring_self_intersection(xy: np.ndarray) -> tuple[int, int] | None:
     """First pair of edges (k, m) of the closed ring xy (N, 2) that touch or cross, else None.
 
@@ -171,14 +184,7 @@ def ring_self_intersection(xy: np.ndarray) -> tuple[int, int] | None:
     a, b = q, q[_next(n)]
     i, j = _edge_pairs(n)
     if i.size:
-        p1, p2, p3, p4 = a[i], b[i], a[j], b[j]
-        o1, o2 = _orient(p1, p2, p3), _orient(p1, p2, p4)
-        o3, o4 = _orient(p3, p4, p1), _orient(p3, p4, p2)
-        hit = (o1 * o2 < 0) & (o3 * o4 < 0)
-        hit |= (o1 == 0) & _on_segment(p1, p2, p3)
-        hit |= (o2 == 0) & _on_segment(p1, p2, p4)
-        hit |= (o3 == 0) & _on_segment(p3, p4, p1)
-        hit |= (o4 == 0) & _on_segment(p3, p4, p2)
+        hit = _edges_touch(a, b, i, j)
         if hit.any():
             k = int(np.flatnonzero(hit)[0])
             return int(i[k]), int(j[k])
@@ -358,15 +364,7 @@ def polygon_measures_many(xyz: Sequence[np.ndarray], cov: Sequence[np.ndarray], 
         a, b = q, q[:, _next(n)]
         i, j = _edge_pairs(n)
         if i.size:
-            p1, p2, p3, p4 = a[:, i], b[:, i], a[:, j], b[:, j]
-            o1, o2 = _orient(p1, p2, p3), _orient(p1, p2, p4)
-            o3, o4 = _orient(p3, p4, p1), _orient(p3, p4, p2)
-            hit = (o1 * o2 < 0) & (o3 * o4 < 0)
-            hit |= (o1 == 0) & _on_segment(p1, p2, p3)
-            hit |= (o2 == 0) & _on_segment(p1, p2, p4)
-            hit |= (o3 == 0) & _on_segment(p3, p4, p1)
-            hit |= (o4 == 0) & _on_segment(p3, p4, p2)
-            good &= ~hit.any(axis=1)
+            good &= ~_edges_touch(a, b, i, j).any(axis=1)
         d0 = b - a
         d1 = d0[:, _next(n)]
         cross = d0[..., 0] * d1[..., 1] - d0[..., 1] * d1[..., 0]
