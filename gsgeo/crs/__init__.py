@@ -1,12 +1,12 @@
 """gsgeo.crs: frames (ECEF <-> ENU), the tileset transform chain, grid output with covariance,
 vertical datums and the measurement pipeline. Knows PROJ, never HTTP.
 
-PROJ never uses the network from gsgeo (PROJ_NETWORK=OFF on import).
+PROJ never uses the network from gsgeo: every module that uses pyproj imports
+gsgeo.crs.resolve, which sets PROJ_NETWORK=OFF on import (tests/test_lint.py checks this).
+Importing the package alone loads no PROJ, so gsgeo.crs.ellipsoid (numpy only) is cheap.
 """
 
 from importlib import import_module
-
-from gsgeo.crs import resolve as _resolve  # noqa: F401  (sets PROJ_NETWORK=OFF on import)
 
 # Names are loaded on first use (PEP 562): importing one submodule, e.g. gsgeo.crs.frames for
 # `gsgeo tiles`, then does not load the measurement pipeline and everything it needs.

@@ -12,22 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from gsgeo.crs.ellipsoid import enu_rotation  # noqa: F401  (part of this module's interface)
 from gsgeo.crs.resolve import source_crs
 from gsgeo.crs.transformers import pipeline, transformer
 from gsgeo.errors import InputError
-
-
-def enu_rotation(lon_deg, lat_deg) -> np.ndarray:
-    """Rotation(s) ECEF -> ENU, shape (..., 3, 3), rows east, north, up."""
-    lam = np.radians(np.asarray(lon_deg, dtype=np.float64))
-    phi = np.radians(np.asarray(lat_deg, dtype=np.float64))
-    sl, cl, sp, cp = np.sin(lam), np.cos(lam), np.sin(phi), np.cos(phi)
-    z = np.zeros_like(lam)
-    return np.stack([
-        np.stack([-sl, cl, z], axis=-1),
-        np.stack([-sp * cl, -sp * sl, cp], axis=-1),
-        np.stack([cp * cl, cp * sl, sp], axis=-1),
-    ], axis=-2)
 
 
 def _rotate(r: np.ndarray, v) -> np.ndarray:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyproj
 
+from gsgeo.crs import resolve as _resolve  # noqa: F401  (PROJ off the network before any use)
 from gsgeo.demo import scene
 
 #: National grid of the demo (British National Grid, OSGB36).

@@ -12,9 +12,14 @@ Four ways to place a scene:
   that the input +y axis points at ``heading`` degrees clockwise from true north;
 - ``crs``: input coordinates are projected-CRS coordinates minus ``offset`` (E, N, H);
   centres go exactly through pyproj; orientations turn by the grid convergence and sizes
-  scale by 1/k, k the point scale factor;
+  scale by 1/k, k the point scale factor (:mod:`gsgeo.tiles.gridplacement`, the only part
+  that loads PROJ);
 - ``transform``: a 4x4 input-to-ECEF matrix (rotation and uniform scale, no shear);
 - ``none``: like ``origin`` at :data:`DEFAULT_ORIGIN` (a warning says so).
+
+The rigid options (origin, transform, none) are WGS 84 ECEF by definition and need only the
+ellipsoid formulas of :mod:`gsgeo.crs.ellipsoid` (PROJ's own, in closed form), so they run
+without loading PROJ.
 
 Before any of these, ``axes`` turns scenes exported Y-up or in COLMAP's Y-down convention
 into Z-up.
@@ -25,18 +30,13 @@ from __future__ import annotations
 import json
 import math
 import os
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import pyproj
-from pyproj.exceptions import CRSError as PyprojCRSError
-from pyproj.exceptions import ProjError
 
-from gsgeo.crs import frames as _frames
-from gsgeo.crs.frames import ecef_to_geodetic, geodetic_to_ecef
-from gsgeo.crs.transformers import accuracy_m, choose
-from gsgeo.errors import CRSError, DatumError, InputError
+from gsgeo.crs import ellipsoid
+from gsgeo.crs.ellipsoid import ecef_to_geodetic, geodetic_to_ecef
+from gsgeo.errors import CRSError, InputError
 from gsgeo.tiles.splats import Splats, matrix_to_quat, quat_multiply, rotation_angle, sh_rotation
 
 #: Where a scene without georeference is put: latitude, longitude (degrees), ellipsoidal height (m).
@@ -57,7 +57,7 @@ SH_ROTATION_MIN_ANGLE = 1e-4
 
 def enu_rotation(lat_deg, lon_deg) -> np.ndarray:
     """Rotation (…, 3, 3) whose rows are east, north, up at (lat, lon): v_enu = R v_ecef."""
-    return _frames.enu_rotation(lon_deg, lat_deg)
+    return ellipsoid.enu_rotation(lon_deg, lat_deg)
 
 
 def rot_z(angle_deg: float | np.ndarray) -> np.ndarray:
@@ -120,13 +120,6 @@ def _similarity(m3: np.ndarray, what: str) -> tuple[np.ndarray, float]:
     return u @ vt, float(s)
 
 
-def _crs(text: str) -> pyproj.CRS:
-    try:
-        return pyproj.CRS.from_user_input(text)
-    except PyprojCRSError as exc:
-        raise CRSError(f"unknown CRS {text!r} ({exc})") from None
-
-
 @dataclass
 class Georeference:
     """How the input coordinates sit on the Earth (see the module docstring)."""
@@ -155,7 +148,8 @@ class Georeference:
         elif self.kind == "crs":
             if self.crs is None:
                 raise InputError("--crs is required with --offset")
-            c = _crs(self.crs)
+            from gsgeo.tiles.gridplacement import parse_crs
+            c = parse_crs(self.crs)
             horiz = c.sub_crs_list[0] if c.is_compound else c
             if not horiz.is_projected:
                 raise CRSError(f"{self.crs} is not a projected CRS; --crs expects grid "
@@ -213,7 +207,8 @@ class Georeference:
         Placement that carries blocks of splats into the root ENU frame there."""
         c_in = (np.asarray(lo, float) + np.asarray(hi, float)) / 2
         if self.kind == "crs":
-            return _GridPlacement(self, c_in)
+            from gsgeo.tiles.gridplacement import GridPlacement
+            return GridPlacement(self, c_in)
         a, t, s = self._rigid_to_ecef()
         c_ecef = a @ c_in + t
         return _RigidPlacement(self, c_ecef, a, t, s)
@@ -279,109 +274,3 @@ class _RigidPlacement(Placement):
     def to_ecef(self, p: np.ndarray) -> np.ndarray:
         """Input coordinates -> ECEF, for reporting."""
         return (p @ self.lin.T + self.off) @ self.r_root + self.centre_ecef
-
-
-class _GridPlacement(Placement):
-    """Projected-CRS input: exact pyproj path for centres, convergence and scale factor."""
-
-    def __init__(self, georef: Georeference, c_in: np.ndarray) -> None:
-        self.g = georef
-        c = _crs(georef.crs)
-        self.horiz = c.sub_crs_list[0] if c.is_compound else c
-        self.geog = self.horiz.geodetic_crs
-        try:
-            self.inv = pyproj.Transformer.from_crs(self.horiz, self.geog, always_xy=True)
-            # The same explicit operation the measurements take back to the grid
-            # (gsgeo.crs.transformers.choose at the scene centre), so a point measured in the
-            # tileset returns to the input's own grid coordinates.
-            lon_c, lat_c = self.inv.transform(c_in[0] + georef.offset[0],
-                                              c_in[1] + georef.offset[1], errcheck=False)
-            self.to_ecef_t, _ = choose(self.geog.to_3d().to_wkt(), "EPSG:4978",
-                                       float(lon_c), float(lat_c))
-            self.proj = pyproj.Proj(self.horiz)
-        except (ProjError, PyprojCRSError) as exc:
-            raise CRSError(f"cannot build the transformation from {georef.crs}: {exc}") from None
-        self.vert = None
-        if georef.height == "vertical":
-            comp = pyproj.CRS.from_user_input(
-                {"$schema": "https://proj.org/schemas/v0.7/projjson.schema.json",
-                 "type": "CompoundCRS", "name": "grid + vertical",
-                 "components": [self.horiz.to_json_dict(),
-                                _crs(georef.vertical_crs).to_json_dict()]})
-            if not comp.sub_crs_list[1].is_vertical:
-                raise CRSError(f"{georef.vertical_crs} is not a vertical CRS")
-            try:
-                self.vert = pyproj.Transformer.from_crs(comp, self.geog.to_3d(), always_xy=True,
-                                                        allow_ballpark=False)
-            except ProjError:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")   # the message below names the grid
-                    grp = pyproj.transformer.TransformerGroup(comp, self.geog.to_3d(),
-                                                              always_xy=True)
-                why = "; ".join(str(w) for w in grp.unavailable_operations[:1]) or \
-                    "no transformation without a geoid grid"
-                raise DatumError(
-                    f"heights in {georef.vertical_crs} need a geoid grid that is not "
-                    f"installed ({why}); pass --geoid FILE.tif or --height ellipsoidal") from None
-        elif georef.height == "geoid":
-            path = os.path.abspath(georef.geoid)
-            try:
-                self.vert = pyproj.Transformer.from_pipeline(
-                    "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
-                    f"+step +proj=vgridshift +grids={path} +multiplier=1 "
-                    "+step +proj=unitconvert +xy_in=rad +xy_out=deg")
-            except ProjError as exc:
-                raise DatumError(f"cannot use geoid grid {georef.geoid}: {exc}") from None
-        centre = self._ecef(c_in[None])[0][0]
-        super().__init__(georef, centre)
-        self.operation = georef.describe() + "; " + self.to_ecef_t.description
-        acc = accuracy_m(self.to_ecef_t)
-        self.operation_accuracy_m = acc
-        if acc is None or acc > 0:
-            georef.warnings.append(
-                f"{self.geog.name} -> WGS 84 goes through '{self.to_ecef_t.description}' "
-                f"(accuracy {'unknown' if acc is None else f'{acc:g} m'})")
-        self.ax = AXES[georef.axes]
-        # SH coefficients turn by the grid-to-root rotation at the scene centre (one turn for
-        # all: across a tileset's +/-2 km it varies far less than SPZ's SH precision)
-        _, lon_c, lat_c = self._ecef(c_in[None])
-        conv_c = float(np.asarray(self.proj.get_factors(lon_c, lat_c, errcheck=False)
-                                  .meridian_convergence, float)[0])
-        self.sh_rot = self.r_root @ enu_rotation(lat_c[0], lon_c[0]).T @ rot_z(-conv_c) @ self.ax
-
-    def _ecef(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Input (axes already Z-up) -> ECEF (N, 3), and geodetic lon, lat on the grid's datum."""
-        e = p[:, 0] + self.g.offset[0]
-        n = p[:, 1] + self.g.offset[1]
-        hh = p[:, 2] + self.g.offset[2]
-        lon, lat = self.inv.transform(e, n, errcheck=False)
-        lon, lat = np.asarray(lon, float), np.asarray(lat, float)
-        if self.g.height == "vertical":
-            _, _, h = self.vert.transform(e, n, hh, errcheck=False)
-        elif self.g.height == "geoid":
-            _, _, h = self.vert.transform(lon, lat, hh, errcheck=False)
-        else:
-            h = hh
-        h = np.asarray(h, float)
-        x, y, z = self.to_ecef_t.transform(lon, lat, h, errcheck=False)
-        out = np.stack([np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)], -1)
-        if not np.isfinite(out).all():
-            bad = int((~np.isfinite(out).all(axis=1)).sum())
-            raise CRSError(f"{bad} splat centre(s) fall outside the area where {self.g.crs}"
-                           + (" or the geoid grid" if self.g.height != "ellipsoidal" else "")
-                           + " can be transformed; check --crs and --offset")
-        return out, lon, lat
-
-    def apply(self, s: Splats) -> Splats:
-        p_in = s.positions @ self.ax.T
-        ecef, lon, lat = self._ecef(p_in)
-        pos = (ecef - self.centre_ecef) @ self.r_root.T
-        f = self.proj.get_factors(lon, lat, errcheck=False)
-        conv = np.asarray(f.meridian_convergence, float)
-        k = np.sqrt(np.asarray(f.areal_scale, float))
-        # grid axes at the splat -> local ENU (turn by -convergence) -> ECEF -> root ENU
-        rot = self.r_root @ np.swapaxes(enu_rotation(lat, lon), -1, -2) @ rot_z(-conv) @ self.ax
-        return self._turn(s, rot, -np.log(k), pos, self.sh_rot)
-
-    def to_ecef(self, p: np.ndarray) -> np.ndarray:
-        return self._ecef(p @ self.ax.T)[0]
