@@ -57,6 +57,38 @@ def test_rotation_v3_identity_and_negative_components():
     assert abs(abs((a[0] * q[0]).sum()) - 1) < 1e-5
 
 
+def _pack_one_v3(q) -> int:
+    """The SPZ v3 rotation word of one quaternion, step by step as the format describes
+    (float32 arithmetic in the reference encoder's order)."""
+    q = np.asarray(q, np.float32)
+    q = q / np.float32(np.sqrt(np.float32(sum(np.float32(c) * np.float32(c) for c in q))))
+    largest = int(np.argmax(np.abs(q)))
+    negate = q[largest] < 0
+    word = largest
+    for i in range(4):
+        if i == largest:
+            continue
+        c = -q[i] if negate else q[i]
+        mag = min(int(np.float32(511.0) * (abs(c) / spz.SQRT1_2) + np.float32(0.5)), 511)
+        word = (word << 10) | (int(c < 0) << 9) | mag
+    return word
+
+
+def test_rotation_v3_words_equal_a_one_at_a_time_encoder(rng):
+    q = rng.normal(size=(3000, 4)).astype(np.float32)
+    q[:500] = np.round(q[:500])                   # ties between components, zeros
+    q[500:600, 3] = 0.0
+    q[600:700] *= np.float32(1e-3)                # unnormalised input
+    q = q[np.abs(q).sum(axis=1) > 0]
+    got = spz.pack_rotations_v3(q)
+    assert [int(v) for v in got] == [_pack_one_v3(r) for r in q]
+
+
+def test_rotation_v3_zero_quaternion_is_the_identity():
+    got = spz.pack_rotations_v3(np.zeros((2, 4), np.float32))
+    np.testing.assert_array_equal(spz.unpack_rotations_v3(got), [[0, 0, 0, 1]] * 2)
+
+
 @pytest.mark.parametrize("version", [2, 3])
 @pytest.mark.parametrize("degree", [0, 1, 2, 3])
 def test_round_trip_within_quantisation(rng, version, degree):
@@ -74,6 +106,21 @@ def test_round_trip_within_quantisation(rng, version, degree):
     if degree:
         bound = 4 / 128 + 0.5 / 128 if degree == 1 else 8 / 128 + 0.5 / 128
         assert np.abs(d.sh - s.sh).max() <= bound + 1e-6
+
+
+@pytest.mark.parametrize("k", [3, 8, 15])
+def test_sh_bytes_equal_the_bucket_formula_in_both_layouts(rng, k):
+    n = 3 * spz.SH_CHUNK // 2 + 7                  # more than one pass, a partial last one
+    cm = rng.normal(scale=0.7, size=(n, 3, k)).astype(np.float32)
+    cm[:50] = rng.choice(np.float32([-3, 3, 0, 1 / 32, -1 / 32]), size=(50, 3, k))
+    sh = cm.transpose(0, 2, 1)                    # (N, K, 3) as a view, the way PLY blocks come
+    # degree 1: 5 bits (bucket 8); degrees 2-3: 4 bits (bucket 16); x*128 + 128 to the
+    # nearest multiple of the bucket, clamped to [0, 256 - bucket]; coefficient-major bytes
+    bucket = np.array([8] * 3 + [16] * 12)[:k, None]
+    idx = np.floor(sh.astype(np.float64) * 128 / bucket + 128 / bucket + 0.5)
+    want = (np.clip(idx, 0, 256 / bucket - 1) * bucket).astype(np.uint8).reshape(n, 3 * k)
+    np.testing.assert_array_equal(spz._quantize_sh(sh), want)
+    np.testing.assert_array_equal(spz._quantize_sh(np.ascontiguousarray(sh)), want)
 
 
 def test_fractional_bits_shrink_for_large_extents(rng):

@@ -13,6 +13,7 @@ so large inputs are held compactly between reading and tile writing.
 
 from __future__ import annotations
 
+import functools
 import gzip
 import struct
 import zlib
@@ -83,53 +84,112 @@ def _sh_buckets(k: int) -> np.ndarray:
     return (1 << (8 - bits)).astype(np.float32)
 
 
+#: Rows of SH quantised per pass (bounds the float temporaries to about 3 MB).
+SH_CHUNK = 16_384
+
+
+@functools.lru_cache(maxsize=16)
+def _sh_constants(k: int, channel_major: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Per-value offset 128 + bucket/2 (float32) and low-bit mask ~(bucket - 1) (u8) for rows
+    of 3k SH values, repeated over SH_CHUNK rows: whole-array operands keep numpy in one long
+    loop, where a broadcast row of 3k values costs a short inner loop per splat."""
+    b = _sh_buckets(k)
+    row = np.tile(b, 3) if channel_major else np.repeat(b, 3)
+    add = np.tile(np.float32(128.0) + row / np.float32(2.0), (SH_CHUNK, 1))
+    mask = np.tile(~(row.astype(np.uint8) - np.uint8(1)), (SH_CHUNK, 1))
+    add.flags.writeable = mask.flags.writeable = False
+    return add, mask
+
+
 def _quantize_sh(sh: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """SH floats (N, K, 3) to bytes (N, K*3): x·128 + 128 to the nearest multiple of the
     coefficient's bucket (the reference encoder's precision), at most 256 - bucket. (The
-    reference encoder rounds twice and clamps to 255; both decode within half a bucket.)"""
+    reference encoder rounds twice and clamps to 255; both decode within half a bucket.)
+
+    With bucket a power of two, floor((x·128 + 128 + bucket/2) clamped to [0, 255]) with its
+    low bits cleared is exactly that multiple."""
     n, k, _ = sh.shape
-    if k == 0:
-        return np.zeros((n, 0), np.uint8) if out is None else out
-    bucket = _sh_buckets(k)
-    channel_major = sh.transpose(0, 2, 1)
-    if channel_major.strides[2] == channel_major.itemsize:
-        # PLY blocks arrive as a transposed view of (N, 3, K): work in memory order, one
-        # value per column, and reorder the bytes to coefficient-major at the end
-        work = channel_major.reshape(n, 3 * k)   # a view when each row's values are adjacent
-        b = np.tile(bucket, 3)
-        perm = (np.arange(k)[:, None] + k * np.arange(3)[None, :]).reshape(-1)
-    else:
-        work, b, perm = sh.reshape(n, 3 * k), np.repeat(bucket, 3), None
-    v = work * (np.float32(128.0) / b)
-    v += np.float32(128.0) / b + np.float32(0.5)
-    # bucket index: floor, clamped so index * bucket <= 255 (truncation is floor once >= 0)
-    np.maximum(v, 0, out=v)
-    np.minimum(v, np.float32(256.0) / b - np.float32(0.5), out=v)
-    u = v.astype(np.uint8).reshape(n, 3 * k)
-    u *= b.astype(np.uint8).reshape(-1)
-    if perm is not None:
-        # mode="clip": with the default "raise", take buffers its output (slow); perm is valid
-        return np.take(u, perm, axis=1, out=out, mode="clip")
     if out is None:
-        return u
-    out[:] = u
+        out = np.empty((n, 3 * k), np.uint8)
+    if not out.flags.c_contiguous:
+        raise ValueError("out must be C-contiguous")  # rows are reshaped in place below
+    if k == 0 or n == 0:
+        return out
+    channel_major = sh.transpose(0, 2, 1)
+    # PLY blocks arrive as a transposed view of (N, 3, K): read them in memory order and put
+    # the bytes in coefficient order at the end
+    cm = channel_major.strides[2] == channel_major.itemsize
+    if cm:
+        work = channel_major.reshape(n, 3 * k)   # a view when each row's values are adjacent
+    else:
+        work = np.ascontiguousarray(sh, np.float32).reshape(n, 3 * k)
+    add, mask = _sh_constants(k, cm)
+    for a in range(0, n, SH_CHUNK):
+        b = min(n, a + SH_CHUNK)
+        v = np.multiply(work[a:b], np.float32(128.0), dtype=np.float32)
+        v += add[:b - a]
+        np.clip(v, 0, 255, out=v)
+        if cm:
+            u = v.astype(np.uint8)
+            u &= mask[:b - a]
+            o3, u3 = out[a:b].reshape(b - a, k, 3), u.reshape(b - a, 3, k)
+            for c in range(3):
+                o3[:, :, c] = u3[:, c, :]
+        else:
+            o = out[a:b]
+            np.copyto(o, v, casting="unsafe")
+            o &= mask[:b - a]
     return out
 
 
 def pack_rotations_v3(q: np.ndarray) -> np.ndarray:
     """Quaternions (N, 4) x, y, z, w to SPZ v3 u32: 2 bits index of the largest |component|,
-    then for each other component in order a sign bit and 9 bits of 511·|c|/√½."""
+    then for each other component in order a sign bit and 9 bits of 511·|c|/√½, the signs
+    taken with the largest component made positive. A zero quaternion is the identity.
+
+    Worked on the (4, N) transpose with whole-array arithmetic: numpy's argmax, where and
+    masked assignment over a 4-wide axis cost several times more than these passes."""
     q = np.asarray(q, np.float32)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    largest = np.argmax(np.abs(q), axis=1)
-    neg = np.take_along_axis(q, largest[:, None], 1) < 0
-    q = np.where(neg, -q, q)
-    comp = largest.astype(np.uint32)
-    for i in range(4):
-        keep = largest != i
-        mag = np.minimum(np.floor(511.0 * (np.abs(q[:, i]) / SQRT1_2) + 0.5), 511).astype(np.uint32)
-        bits = ((q[:, i] < 0).astype(np.uint32) << 9) | mag
-        comp = np.where(keep, (comp << 10) | bits, comp)
+    qt = np.ascontiguousarray(q.T)
+    a = np.abs(qt)
+    top = np.maximum(np.maximum(a[0], a[1]), np.maximum(a[2], a[3]))
+    # index of the largest |component|, the first of equals (as argmax): n0 (1 + n1 (1 + n2))
+    # with n_i "component i is not the largest"
+    largest = (a[2] != top).astype(np.uint32)
+    largest += 1
+    largest *= a[1] != top
+    largest += 1
+    largest *= a[0] != top
+    signed = np.choose(largest, qt)
+    sq = qt * qt
+    norm2 = sq[0] + sq[1]
+    norm2 += sq[2]
+    norm2 += sq[3]
+    zero = norm2 < np.float32(1e-30)
+    np.maximum(norm2, np.float32(1e-30), out=norm2)
+    # in the reference encoder's order of operations, so the bytes match it
+    a /= np.sqrt(norm2)
+    a /= SQRT1_2
+    a *= np.float32(511.0)
+    a += np.float32(0.5)
+    np.minimum(a, np.float32(511.0), out=a)
+    fields = a.astype(np.uint64)                       # 511·|c|/√½ rounded, per component
+    qt *= signed                                       # < 0: sign opposite to the largest
+    fields |= (qt < 0).astype(np.uint64) << np.uint64(9)
+    # the four 10-bit fields side by side (40 bits), then the largest one's field cut out
+    row = fields[0] << np.uint64(30)
+    row |= fields[1] << np.uint64(20)
+    row |= fields[2] << np.uint64(10)
+    row |= fields[3]
+    shift = (np.uint64(3) - largest) * np.uint64(10)   # bits below the dropped field
+    low = row & ((np.uint64(1) << shift) - np.uint64(1))
+    row >>= shift + np.uint64(10)
+    row <<= shift
+    row |= low
+    comp = row.astype(np.uint32)
+    comp |= largest << np.uint32(30)
+    if zero.any():
+        comp[zero] = np.uint32(3 << 30)                # w = 1, the rest 0
     return comp
 
 
