@@ -372,26 +372,27 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
             for done in imap(_write_tile, tasks):
                 bar.update(done)
             bar.close()
-        lon, lat, h = ecef_to_geodetic(_corners(root.lo.astype(float), root.hi.astype(float))
-                                       @ placement.r_root
-                                       + placement.centre_ecef)
-        summary = Summary(
-            input=str(src_path), output=str(out), splats_in=count, splats_written=n,
-            dropped_nonfinite=dropped, sh_degree=sh_degree, tiles=len(nodes),
-            levels=1 + max(nd.level for nd in root.walk()),
-            georeference=georef.describe(), operation_accuracy_m=placement.operation_accuracy_m,
-            root_lon_lat_h=placement.centre_lonlath,
-            bounds_lon_lat_h={"lon": [float(lon.min()), float(lon.max())],
-                              "lat": [float(lat.min()), float(lat.max())],
-                              "h": [float(h.min()), float(h.max())]},
-            fractional_bits=frac, spz_version=spz_version, seconds=0.0,
-            warnings=list(georef.warnings))
-        write_tileset_json(tmp / "tileset.json", root, placement.root_transform,
-                           {"gsgeo": {"georeference": summary.georeference,
-                                      "operation": placement.operation,
-                                      "splats": n, "sh_degree": sh_degree,
-                                      "root_frame": "ENU at the scene centre (WGS 84)"}})
-        _commit(tmp, out)
+            imap.close()   # the workers exit while the tileset JSON is written
+            lon, lat, h = ecef_to_geodetic(_corners(root.lo.astype(float), root.hi.astype(float))
+                                           @ placement.r_root
+                                           + placement.centre_ecef)
+            summary = Summary(
+                input=str(src_path), output=str(out), splats_in=count, splats_written=n,
+                dropped_nonfinite=dropped, sh_degree=sh_degree, tiles=len(nodes),
+                levels=1 + max(nd.level for nd in root.walk()),
+                georeference=georef.describe(), operation_accuracy_m=placement.operation_accuracy_m,
+                root_lon_lat_h=placement.centre_lonlath,
+                bounds_lon_lat_h={"lon": [float(lon.min()), float(lon.max())],
+                                  "lat": [float(lat.min()), float(lat.max())],
+                                  "h": [float(h.min()), float(h.max())]},
+                fractional_bits=frac, spz_version=spz_version, seconds=0.0,
+                warnings=list(georef.warnings))
+            write_tileset_json(tmp / "tileset.json", root, placement.root_transform,
+                               {"gsgeo": {"georeference": summary.georeference,
+                                          "operation": placement.operation,
+                                          "splats": n, "sh_degree": sh_degree,
+                                          "root_frame": "ENU at the scene centre (WGS 84)"}})
+            _commit(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -69,17 +69,35 @@ def _guarded(fn_and_task):
         raise WorkerFailed(f"{type(exc).__name__} in a worker: {exc}") from None
 
 
+class Imap:
+    """``imap(fn, tasks)``: results in completion order; ``close()`` says no more tasks will
+    come, so the workers exit (and the kernel frees their memory) while the caller goes on."""
+
+    def __init__(self, p=None) -> None:
+        self._pool = p
+
+    def __call__(self, fn: Callable, tasks: Iterable) -> Iterator:
+        if self._pool is None:
+            return (fn(t) for t in tasks)
+        return self._pool.imap_unordered(_guarded, ((fn, t) for t in tasks))
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.close()
+
+
 @contextmanager
-def pool(processes: int) -> Iterator[Callable[[Callable, Iterable], Iterator]]:
-    """Yield ``imap(fn, tasks)``: results in completion order. ``fn`` must be a module-level
-    function; the state it reads must be set before entering (workers fork here)."""
+def pool(processes: int) -> Iterator[Imap]:
+    """Yield an :class:`Imap` over ``processes`` forked workers (in this process when
+    ``processes`` <= 1). ``fn`` must be a module-level function; the state it reads must be
+    set before entering (workers fork here). Leaving the block waits for the workers."""
     if processes <= 1 or not can_fork():
-        yield lambda fn, tasks: (fn(t) for t in tasks)
+        yield Imap()
         return
     ctx = multiprocessing.get_context("fork")
     p = ctx.Pool(processes, initializer=_quiet_child)
     try:
-        yield lambda fn, tasks: p.imap_unordered(_guarded, ((fn, t) for t in tasks))
+        yield Imap(p)
         p.close()
         p.join()
     finally:
