@@ -225,6 +225,7 @@ class Placement:
         self.r_root = enu_rotation(float(lat), float(lon))   # ECEF -> root ENU
         self.operation = ""
         self.operation_accuracy_m: float | None = None
+        self._sh_turns: dict[tuple[int, bytes], np.ndarray] = {}
 
     @property
     def root_transform(self) -> np.ndarray:
@@ -251,9 +252,12 @@ class Placement:
         sh = s.sh
         k = sh.shape[1]
         if k and rotation_angle(sh_rot) > SH_ROTATION_MIN_ANGLE:
-            d = sh_rotation(sh_rot, k).astype(np.float32)
-            sh = np.einsum("ij,njc->nic", d, sh, optimize=True)
-        return Splats(positions, scales.astype(np.float32), rot_q.astype(np.float32),
+            key = (k, sh_rot.tobytes())
+            if key not in self._sh_turns:    # one least-squares fit per build, not per block
+                self._sh_turns[key] = sh_rotation(sh_rot, k).astype(np.float32)
+            sh = np.einsum("ij,njc->nic", self._sh_turns[key], sh, optimize=True)
+        return Splats(positions, scales.astype(np.float32, copy=False),
+                      rot_q.astype(np.float32, copy=False),
                       s.opacities, s.colors, sh)
 
 
