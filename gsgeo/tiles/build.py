@@ -237,13 +237,13 @@ def _write_tile(task: tuple[str, int, int, int, str]) -> int:
     sorted, so the gather is near-sequential); returns its number of splats."""
     name, start, stop, frac, folder = task
     job = _JOB
-    b = job.held.take(job.tree.perm[start:stop])
-    blob, lo, hi = spz.pack_bounded(b, job.sh_degree, version=job.spz_version,
-                                    fractional_bits=frac, level=job.level)
-    data = gltf.tile_glb(blob, b.count, job.sh_degree, lo, hi)
+    rows = job.tree.perm[start:stop]
+    blob, lo, hi = spz.pack_bounded(job.held, job.sh_degree, version=job.spz_version,
+                                    fractional_bits=frac, level=job.level, rows=rows)
+    data = gltf.tile_glb(blob, rows.shape[0], job.sh_degree, lo, hi)
     with open(os.path.join(folder, f"{name}.glb"), "wb") as f:
         f.write(data)
-    return b.count
+    return int(rows.shape[0])
 
 
 def _build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,

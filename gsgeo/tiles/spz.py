@@ -270,12 +270,14 @@ def pack(b: SpzBytes, sh_degree: int, *, version: int = 3, fractional_bits: int 
 
 
 def pack_bounded(b: SpzBytes, sh_degree: int, *, version: int = 3, fractional_bits: int = 12,
-                 level: int = 6, antialiased: bool = False
+                 level: int = 6, antialiased: bool = False, rows: np.ndarray | None = None
                  ) -> tuple[bytes, np.ndarray, np.ndarray]:
     """:func:`pack`, plus the box (lo, hi: (3,) float64, metres) of the positions as they
-    decode from the payload, for the glTF POSITION accessor."""
-    n = b.count
-    fixed = np.rint(b.positions * (1 << fractional_bits)).astype(np.int32)
+    decode from the payload, for the glTF POSITION accessor. With ``rows``, the splats packed
+    are those rows of ``b``, gathered straight into the payload (no intermediate copy)."""
+    n = b.count if rows is None else int(rows.shape[0])
+    pos = b.positions if rows is None else np.take(b.positions, rows, axis=0, mode="clip")
+    fixed = np.rint(pos * (1 << fractional_bits)).astype(np.int32)
     # per column: numpy's axis-0 reductions of narrow arrays are several times slower
     lo = np.array([fixed[:, i].min() if n else 0 for i in range(3)], np.float64)
     hi = np.array([fixed[:, i].max() if n else 0 for i in range(3)], np.float64)
@@ -292,9 +294,14 @@ def pack_bounded(b: SpzBytes, sh_degree: int, *, version: int = 3, fractional_bi
     # 24-bit little-endian: the low three bytes of each int32
     raw[o:o + 9 * n].reshape(n, 3, 3)[:] = fixed.astype("<i4").view(np.uint8).reshape(n, 3, 4)[:, :, :3]
     o += 9 * n
-    rot = b.rotations.astype("<u4").view(np.uint8) if version == 3 else b.rotations
+    rot = b.rotations.astype("<u4", copy=False).view(np.uint8).reshape(-1, 4) \
+        if version == 3 else b.rotations
     for arr, size in zip((b.alphas, b.colors, b.scales, rot, b.sh), sizes[1:], strict=True):
-        raw[o:o + size] = arr.reshape(-1)
+        dst = raw[o:o + size].reshape((n,) + arr.shape[1:])
+        if rows is None:
+            dst[:] = arr
+        else:   # mode="clip": with "raise", take buffers its output
+            np.take(arr, rows, axis=0, out=dst, mode="clip")
         o += size
     comp = compressor(level)
     scale = 1.0 / (1 << fractional_bits)
