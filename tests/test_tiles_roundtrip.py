@@ -181,6 +181,35 @@ def test_nonfinite_splats_are_dropped_and_counted(tmp_path, rng):
     assert read_tileset(tmp_path / "out").count == 497
 
 
+def test_nonfinite_screen_of_float_records_equals_the_exact_check(tmp_path, rng):
+    """Binary PLY blocks are screened by one row sum over every float of a record; records
+    it flags get the exact per-attribute check. A NaN normal (a property gsgeo ignores) keeps
+    its splat; a zero quaternion, a NaN opacity or an infinite SH coefficient drop theirs."""
+    from gsgeo.tiles.ply import read_layout
+    from gsgeo.tiles.source import open_source
+
+    s = random_splats(rng, 3000, 3)
+    write_ply(tmp_path / "in.ply", s)
+    lay = read_layout(tmp_path / "in.ply")
+    rec = np.memmap(tmp_path / "in.ply", lay.dtype, "r+", offset=lay.data_offset, shape=lay.count)
+    rec["nx"][7] = np.nan
+    rec["ny"][8] = np.inf
+    for name in ("rot_0", "rot_1", "rot_2", "rot_3"):
+        rec[name][100] = 0.0
+    rec["opacity"][200] = np.nan
+    rec["f_rest_44"][2999] = -np.inf
+    rec["scale_0"][1500] = 3e38              # finite, but a row sum overflows: exact check
+    rec.flush()
+    del rec
+    src = open_source(tmp_path / "in.ply", 1024)
+    for a in range(0, 3000, 1024):
+        got, ok = src.read_finite(a, min(3000, a + 1024))
+        np.testing.assert_array_equal(ok, got.finite_mask())
+    summary = build_tileset(tmp_path / "in.ply", tmp_path / "out",
+                            Georeference("origin", origin=(LAT, LON, H)), progress=None)
+    assert summary.dropped_nonfinite == 3
+
+
 def _geoid_tif(path, n0=-33.0, slope=0.5):
     """A small geoid grid over Ohio: N = n0 + slope * (lon + 83) metres, WGS 84 lon/lat."""
     import rasterio

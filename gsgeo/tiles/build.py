@@ -207,8 +207,7 @@ def _quantise_block(start: int, stop: int) -> tuple[int, int, float]:
     quantise them into held rows [start, start + kept), with the tree's inputs. Returns
     (start, kept, largest |coordinate| in metres)."""
     job = _JOB
-    s = job.source.read(start, stop)
-    ok = s.finite_mask()
+    s, ok = job.source.read_finite(start, stop)
     if not ok.all():
         s = s.take(ok)
     m, extent = s.count, 0.0

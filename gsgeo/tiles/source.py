@@ -37,6 +37,11 @@ class Source:
         the next call overwrites."""
         raise NotImplementedError
 
+    def read_finite(self, start: int, stop: int) -> tuple[Splats, np.ndarray]:
+        """:meth:`read` and the splats' :meth:`~gsgeo.tiles.splats.Splats.finite_mask`."""
+        s = self.read(start, stop)
+        return s, s.finite_mask()
+
 
 class _BinaryPly(Source):
     def __init__(self, layout: ply.PlyLayout, block: int) -> None:
@@ -44,6 +49,9 @@ class _BinaryPly(Source):
         self.count, self.sh_degree, self.size_bytes = layout.count, layout.sh_degree, \
             layout.size_bytes
         self.reader = ply.RecordReader(layout, block)
+        dt = layout.dtype
+        uniform = all(dt[i] == np.dtype("<f4") for i in range(len(dt.names)))
+        self._ones = np.ones(len(dt.names), np.float32) if uniform else None
 
     def bounds(self):
         lo, hi, n = ply.ply_bounds(self.layout, sample=CENTRE_SAMPLE)
@@ -53,6 +61,22 @@ class _BinaryPly(Source):
 
     def read(self, start: int, stop: int) -> Splats:
         return ply.records_to_splats(self.reader.read(start, stop), self.layout)
+
+    def read_finite(self, start: int, stop: int) -> tuple[Splats, np.ndarray]:
+        rec = self.reader.read(start, stop)
+        s = ply.records_to_splats(rec, self.layout)
+        if self._ones is None:
+            return s, s.finite_mask()
+        # All-float32 records: one matrix-vector product screens every value of a record (a
+        # sum is finite only if each term is); the few records it flags (a non-finite value,
+        # perhaps in a property gsgeo ignores, or a sum beyond float32) get the exact check.
+        with np.errstate(over="ignore", invalid="ignore"):
+            ok = np.isfinite(rec.view(np.float32).reshape(rec.shape[0], -1) @ self._ones)
+        ok &= np.einsum("ij,ij->i", s.rotations, s.rotations) > 0
+        if not ok.all():
+            bad = np.flatnonzero(~ok)
+            ok[bad] = s.take(bad).finite_mask()
+        return s, ok
 
 
 class _InMemory(Source):
