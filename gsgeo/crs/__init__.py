@@ -2,7 +2,8 @@
 vertical datums and the measurement pipeline. Knows PROJ, never HTTP.
 
 PROJ never uses the network from gsgeo: every module that uses pyproj imports
-gsgeo.crs.resolve, which sets PROJ_NETWORK=OFF on import (tests/test_lint.py checks this).
+gsgeo.crs.resolve, which sets PROJ_NETWORK=OFF on import (tests/test_crs_ellipsoid.py checks
+this).
 Importing the package alone loads no PROJ, so gsgeo.crs.ellipsoid (numpy only) is cheap.
 """
 
