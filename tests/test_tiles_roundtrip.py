@@ -198,7 +198,7 @@ def test_nonfinite_screen_of_float_records_equals_the_exact_check(tmp_path, rng)
         rec[name][100] = 0.0
     rec["opacity"][200] = np.nan
     rec["f_rest_44"][2999] = -np.inf
-    rec["scale_0"][1500] = 3e38              # finite, but a row sum overflows: exact check
+    rec["nx"][1500] = rec["ny"][1500] = 2e38  # finite, but the row sum overflows: exact check
     rec.flush()
     del rec
     src = open_source(tmp_path / "in.ply", 1024)
