@@ -9,12 +9,14 @@ Inputs (written to benchmarks/out/, git-ignored):
   copy with jittered centres, so they compress like real data (random values would not).
   Without the shared data, random splats are used instead (and the table says so).
 
-Each tool runs --repeat times (default 3) on each input, the tools taking turns, each run a
-separate process under /usr/bin/time; the best wall time is reported (the machine's speed
-varies from minute to minute) with the worst beside it. Per run: wall time, CPU time,
-peak memory against the bound 1.5 x input + 300 MB (sampled every 0.1 s as the sum of the
-proportional set sizes of the tool's whole process tree, gsgeo's worker processes included;
-/usr/bin/time's maximum RSS of the largest single process is shown beside it), output size.
+Each tool runs once for memory and then --repeat times (default 3) for time on each input,
+the tools taking turns, each run a separate process under /usr/bin/time; the best wall time
+is reported (the machine's speed varies from minute to minute) with the worst beside it.
+Reported: wall time, CPU time, peak memory against the bound 1.5 x input + 300 MB (in the
+memory run, sampled every 0.1 s as the sum of the proportional set sizes of the tool's whole
+process tree, gsgeo's worker processes included; sampling slows the tool, so timed runs do
+not sample; /usr/bin/time's maximum RSS of the largest single process over all runs is shown
+beside it), output size.
 gsgeo runs with its defaults (gzip level 1 through ISA-L, one worker process per CPU,
 georeference by --transform for real.ply and by --origin for the synthetic ones);
 splat-transform writes one .spz (no tiling).
@@ -127,17 +129,18 @@ def _pss_mb(pids: list[int]) -> float:
     return kb / 1024
 
 
-def timed(cmd: list[str], cwd: Path | None = None) -> dict:
-    """Run cmd under /usr/bin/time; also sample the memory of its whole process tree (worker
-    processes included) every 0.1 s (reading smaps_rollup walks page tables: more often slows
-    the tool measured): /usr/bin/time's maximum RSS is that of the single
-    largest process, which understates a multi-process tool."""
+def timed(cmd: list[str], cwd: Path | None = None, sample_memory: bool = False) -> dict:
+    """Run cmd under /usr/bin/time. With ``sample_memory``, also sample the memory of its
+    whole process tree (worker processes included) every 0.1 s: /usr/bin/time's maximum RSS
+    is that of the single largest process, which understates a multi-process tool. Sampling
+    reads smaps_rollup, which walks page tables and on two CPUs slows the tool measured by
+    about 10 %, so timed runs do not sample (``peak_tree_mb`` is then None)."""
     tf = OUT / "time.txt"
     t0 = time.monotonic()
     proc = subprocess.Popen(["/usr/bin/time", "-f", "%e %M %U %S", "-o", str(tf)] + cmd,
                             cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    peak = 0.0
-    while proc.poll() is None:
+    peak = 0.0 if sample_memory else None
+    while sample_memory and proc.poll() is None:
         peak = max(peak, _pss_mb(_descendants(proc.pid)[1:]))   # not /usr/bin/time itself
         time.sleep(0.1)
     out, err = proc.communicate()
@@ -183,33 +186,38 @@ def main() -> int:
         in_mb = path.stat().st_size / 1e6
         bound = 1.5 * path.stat().st_size / 2**20 + 300
         runs: dict[str, list[dict]] = {}
-        # the tools take turns, so a slow spell of the (shared, virtual) machine hits both
-        for rep in range(args.repeat):
+        # the tools take turns, so a slow spell of the (shared, virtual) machine hits both;
+        # run 0 samples the memory of the process tree and is not timed
+        for rep in range(args.repeat + 1):
+            what = "memory" if rep == 0 else f"run {rep}"
             for level in [int(v) for v in args.levels.split(",")]:
                 out = OUT / f"tiles_{path.stem}_l{level}"
-                _log(f"gsgeo tiles {path.name} (level {level}, run {rep + 1}) ...")
+                _log(f"gsgeo tiles {path.name} (level {level}, {what}) ...")
                 r = timed([sys.executable, "-m", "gsgeo", "tiles", str(path), "-o", str(out),
-                           "--overwrite", "--quiet", "--json", "--level", str(level)] + georef)
+                           "--overwrite", "--quiet", "--json", "--level", str(level)] + georef,
+                          sample_memory=rep == 0)
                 summ = json.loads(r.pop("stdout"))
                 r.update(output_mb=_size_mb(out), tiles=summ["tiles"], levels=summ["levels"])
                 runs.setdefault(f"gsgeo tiles (gzip {level})", []).append(r)
                 shutil.rmtree(out, ignore_errors=True)
             if st_ok:
                 out = OUT / f"st_{path.stem}.spz"
-                _log(f"splat-transform {path.name} (run {rep + 1}) ...")
-                r = timed([str(SPLAT_TRANSFORM), "-q", str(path), str(out)])
+                _log(f"splat-transform {path.name} ({what}) ...")
+                r = timed([str(SPLAT_TRANSFORM), "-q", str(path), str(out)],
+                          sample_memory=rep == 0)
                 r.pop("stdout")
                 r.update(output_mb=_size_mb(out))
                 runs.setdefault("splat-transform -> .spz", []).append(r)
                 out.unlink(missing_ok=True)
         for tool, rs in runs.items():
-            best = min(rs, key=lambda r: r["wall_s"])
+            mem, timed_runs = rs[0], rs[1:]
+            best = min(timed_runs, key=lambda r: r["wall_s"])
             rows.append({"tool": tool, "input": label, "splats": n, "input_mb": in_mb, **best,
-                         "wall_worst_s": max(r["wall_s"] for r in rs),
-                         "peak_tree_mb": max(r["peak_tree_mb"] for r in rs),
+                         "wall_worst_s": max(r["wall_s"] for r in timed_runs),
+                         "peak_tree_mb": mem["peak_tree_mb"],
                          "peak_rss_mb": max(r["peak_rss_mb"] for r in rs),
                          "splats_per_s": n / best["wall_s"], "rss_bound_mb": bound,
-                         "runs": len(rs)})
+                         "runs": len(timed_runs)})
     meta = {"cpus": os.cpu_count(), "python": platform.python_version(),
             "load_avg_at_end": os.getloadavg(), "date": time.strftime("%Y-%m-%d %H:%M UTC",
                                                                         time.gmtime())}

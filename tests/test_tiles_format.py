@@ -3,6 +3,7 @@ PLY layouts and the `gsgeo tiles` command line."""
 
 from __future__ import annotations
 
+import gc
 import json
 import struct
 from pathlib import Path
@@ -226,6 +227,7 @@ def test_cli_summary_and_errors(tmp_path, rng, capsys):
     assert rc == 0
     assert "2,000 written" in cap.out and "lat 39.99" in cap.out and "Z-up" in cap.out
     assert "reading" in cap.err and "writing" in cap.err      # progress bars
+    assert gc.isenabled()          # the command pauses the cyclic collector only while it runs
     rc = main(["tiles", str(tmp_path / "in.ply"), "-o", str(tmp_path / "o2")])
     assert rc == 0 and "default origin" in capsys.readouterr().err
     for argv, msg in [

@@ -36,16 +36,17 @@ def can_fork() -> bool:
 def _quiet_child() -> None:
     # Ctrl-C reaches the whole process group: the parent handles it and stops the pool
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _keep_freed_memory()
+    keep_freed_memory()
 
 
-def _keep_freed_memory() -> None:
+def keep_freed_memory() -> None:
     """Let glibc's malloc reuse freed blocks instead of returning them to the kernel.
 
     A worker allocates and frees the same few megabyte-sized numpy temporaries for every
     block; by default glibc maps such sizes fresh (or trims them off the heap) each time, and
     the page faults of touching them again cost more system time than the arithmetic.
-    Workers are short-lived, so keeping the memory is harmless."""
+    Workers are short-lived, so keeping the memory is harmless; the `gsgeo tiles` command
+    does the same in its own process (a batch job too), not build_tileset."""
     try:
         libc = ctypes.CDLL(None)
         m_trim_threshold, m_mmap_threshold = -1, -3
