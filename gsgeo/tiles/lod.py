@@ -86,36 +86,59 @@ class TreeInput:
         r = float(self.radius[a:b].max())
         return p.min(axis=1).astype(np.float64) - r, p.max(axis=1).astype(np.float64) + r
 
-    def partition(self, a: int, b: int, keep: int) -> list[tuple[int, int]]:
-        """Reorder [a, b): the ``keep`` largest keys first, then the rest split at medians,
-        one split on each axis whose spread (over the node's splats) is at least half the
-        largest (up to 8 parts).
-        Returns the parts as ranges (the kept splats are [a, a + keep))."""
+    def columns(self) -> tuple[np.ndarray, ...]:
+        """The arrays that are permuted together."""
+        return (self.pos[0], self.pos[1], self.pos[2], self.radius, self.key, self.perm)
+
+    def first_split(self, a: int, b: int, keep: int
+                    ) -> tuple[np.ndarray, list[int], list[tuple[int, int]]]:
+        """Stage one of :meth:`partition`, moving nothing: the order of [a, b) (offsets from
+        a) with the ``keep`` largest keys first and the rest split at its median on the first
+        split axis; the split axes (each whose spread over the node's splats is at least half
+        the largest); and the halves of the rest as ranges of ``order[keep:]``."""
         m = b - a
         order = np.argpartition(-self.key[a:b], keep - 1) if keep < m else np.arange(m)
-        rest = order[keep:]
         p = self.pos[:, a:b]
         # the spread of the whole node: the kept splats lie all over it, and contiguous rows
         # reduce far faster than a gather of the rest
         spread = p.max(axis=1) - p.min(axis=1)
         axes = [ax for ax in np.argsort(-spread) if spread[ax] >= 0.5 * spread.max()] or [0]
-        parts = [(0, rest.shape[0])]
-        for ax in axes:
-            nxt = []
-            for lo, hi in parts:
-                if hi - lo < 2:
-                    nxt.append((lo, hi))
-                    continue
-                half = (hi - lo) // 2
-                sub = rest[lo:hi]
-                # np.take: a plain gather loop, faster than fancy indexing
-                rest[lo:hi] = np.take(sub, np.argpartition(np.take(p[ax], sub), half))
-                nxt += [(lo, lo + half), (lo + half, hi)]
-            parts = nxt
-        for arr in (self.pos[0], self.pos[1], self.pos[2], self.radius, self.key, self.perm):
+        return order, axes, split_parts(p, order[keep:], axes[:1])
+
+    def partition(self, a: int, b: int, keep: int) -> list[tuple[int, int]]:
+        """Reorder [a, b): the ``keep`` largest keys first, then the rest split at medians,
+        one split on each axis whose spread (over the node's splats) is at least half the
+        largest (up to 8 parts).
+        Returns the parts as ranges (the kept splats are [a, a + keep))."""
+        order, axes, halves = self.first_split(a, b, keep)
+        rest, p = order[keep:], self.pos[:, a:b]
+        parts = [(lo + x, lo + y) for lo, hi in halves
+                 for x, y in split_parts(p, rest[lo:hi], axes[1:])]
+        for arr in self.columns():
             arr[a:b] = np.take(arr[a:b], order)
         base = a + keep
         return [(base + lo, base + hi) for lo, hi in parts if hi > lo]
+
+
+def split_parts(p: np.ndarray, rest: np.ndarray, axes: list[int]) -> list[tuple[int, int]]:
+    """Split ``rest`` (column offsets into the centres ``p`` (3, M)) in place at its median
+    along each of ``axes`` in turn, every part at each level; returns the parts as ranges of
+    ``rest``. Parts of one level are independent, so the halves of a first split may be
+    finished separately (in different processes) with the same result."""
+    parts = [(0, rest.shape[0])]
+    for ax in axes:
+        nxt = []
+        for lo, hi in parts:
+            if hi - lo < 2:
+                nxt.append((lo, hi))
+                continue
+            half = (hi - lo) // 2
+            sub = rest[lo:hi]
+            # np.take: a plain gather loop, faster than fancy indexing
+            rest[lo:hi] = np.take(sub, np.argpartition(np.take(p[ax], sub), half))
+            nxt += [(lo, lo + half), (lo + half, hi)]
+        parts = nxt
+    return parts
 
 
 def tie_breaker(idx: np.ndarray) -> np.ndarray:
