@@ -292,8 +292,8 @@ def test_broken_compressed_ply_is_named(tmp_path):
 
 
 def test_tree_grown_by_worker_processes_equals_the_serial_tree():
-    """gsgeo tiles grows subtrees in forked workers on shared memory; the tree must be the
-    one build_tree gives in one process, node for node (indices and boxes)."""
+    """gsgeo tiles splits the root and grows subtrees in forked workers on shared memory; the
+    tree must be the one build_tree gives in one process, node for node (indices and boxes)."""
     from gsgeo.tiles.workers import pool, shared_empty
 
     rng = np.random.default_rng(1)
@@ -302,19 +302,42 @@ def test_tree_grown_by_worker_processes_equals_the_serial_tree():
     rad, prom = np.full(n, 0.02, np.float32), rng.random(n).astype(np.float32)
     serial = lod.build_tree(pos, rad, prom, max_splats=1000)
     ref = lod.TreeInput.from_splats(pos, rad, prom)
-    shared = lod.TreeInput(shared_empty((3, n), np.float32), shared_empty(n, np.float32),
-                           shared_empty(n, np.float32), shared_empty(n, np.int32))
-    for dst, src in ((shared.pos, ref.pos), (shared.radius, ref.radius),
-                     (shared.key, ref.key), (shared.perm, ref.perm)):
-        dst[:] = src
+
+    def fresh():
+        w = lod.TreeInput(shared_empty((3, n), np.float32), shared_empty(n, np.float32),
+                          shared_empty(n, np.float32), shared_empty(n, np.int32))
+        for dst, src in ((w.pos, ref.pos), (w.radius, ref.radius), (w.key, ref.key),
+                         (w.perm, ref.perm)):
+            dst[:] = src
+        return w
+
+    # the root split by the workers into a second set of columns: with a half per worker
+    # (they grow the root's children too), and with more workers than halves
+    par = {}
+    for nproc in (2, 4):
+        shared, order = fresh(), shared_empty(n, np.int32)
+        second = lod.TreeInput(shared_empty((3, n), np.float32), shared_empty(n, np.float32),
+                               shared_empty(n, np.float32), shared_empty(n, np.int32))
+        build_mod._JOB = build_mod._Job(None, None, None, shared, 3, 3, 1, second, order)
+        try:
+            with pool(2) as imap:
+                par[nproc], t = build_mod._build_tree(shared, imap, nproc, 1000, None, second,
+                                                      order)
+        finally:
+            build_mod._JOB = None
+        assert t == 1
+    shared = fresh()         # the root split here, in place
     build_mod._JOB = build_mod._Job(None, None, None, shared, 3, 3, 1)
     try:
         with pool(2) as imap:
-            par = build_mod._build_tree(shared, imap, 2, 1000, None)
+            par_top, t = build_mod._build_tree(shared, imap, 2, 1000, None)
     finally:
         build_mod._JOB = None
+    assert t == 0
 
     def nodes(root):
         return {nd.name: (nd.index.tolist(), nd.lo.tolist(), nd.hi.tolist()) for nd in root.walk()}
-    assert max(nd.level for nd in par.walk()) >= 3
-    assert nodes(par) == nodes(serial)
+    assert max(nd.level for nd in serial.walk()) >= 3
+    assert nodes(par[2]) == nodes(serial)
+    assert nodes(par[4]) == nodes(serial)
+    assert nodes(par_top) == nodes(serial)

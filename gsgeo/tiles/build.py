@@ -188,6 +188,13 @@ class _Job:
     spz_version: int
     sh_degree: int
     level: int
+    # for the root split in the workers (None when it is done in one process): a second set
+    # of tree columns the root's halves are moved into, and the root's order of the splats
+    tree2: lod.TreeInput | None = None
+    order: np.ndarray | None = None
+
+    def trees(self, t: int) -> lod.TreeInput:
+        return self.tree2 if t else self.tree
 
 
 _JOB: _Job | None = None
@@ -225,18 +232,44 @@ def _quantise_block(start: int, stop: int) -> tuple[int, int, float]:
     return start, m, extent
 
 
-def _grow_subtree(task: tuple[lod.Node, int, int, int, int]) -> lod.Node:
-    """Grow the subtree of a node over the shared tree input's range [a, b) in place."""
-    node, a, b, max_splats, parent_splats = task
-    return lod.grow(_JOB.tree, node, a, b, max_splats, parent_splats)
-
-
-def _write_tile(task: tuple[str, int, int, int, str]) -> int:
-    """Pack, compress and write one tile (its splats: held rows tree.perm[start:stop],
-    sorted, so the gather is near-sequential); returns its number of splats."""
-    name, start, stop, frac, folder = task
+def _finish_root_half(task: tuple) -> list[tuple]:
+    """Finish the root's split on one half of its rest (``job.order[keep + lo:keep + hi]``,
+    offsets into the first tree columns; the remaining axes), move that half's columns into
+    the second set and return its non-empty parts as (lo, hi, box lo, box hi, node), ranges
+    of the rest. With ``grow`` (max_splats, parent_splats), the parts become the root's
+    children from number ``first`` on, grown to the leaves here (``node``; else None)."""
+    keep, lo, hi, axes, n, first, grow = task
     job = _JOB
-    rows = job.tree.perm[start:stop]
+    src, dst = job.tree, job.tree2
+    idx = job.order[keep + lo:keep + hi]
+    parts = lod.split_parts(src.pos[:, :n], idx, axes)
+    for s, d in zip(src.columns(), dst.columns(), strict=True):
+        np.take(s, idx, out=d[keep + lo:keep + hi], mode="clip")
+    out = []
+    for x, y in parts:
+        if y > x:
+            a, b = keep + lo + x, keep + lo + y
+            blo, bhi = dst.box(a, b)
+            node = None
+            if grow:
+                node = lod.grow(dst, lod.Node(dst.perm[:0], blo, bhi, 1, f"0_{first + len(out)}"),
+                                a, b, *grow)
+            out.append((lo + x, lo + y, blo, bhi, node))
+    return out
+
+
+def _grow_subtree(task: tuple[int, lod.Node, int, int, int, int]) -> lod.Node:
+    """Grow the subtree of a node over the range [a, b) of tree columns t in place."""
+    t, node, a, b, max_splats, parent_splats = task
+    return lod.grow(_JOB.trees(t), node, a, b, max_splats, parent_splats)
+
+
+def _write_tile(task: tuple[int, str, int, int, int, str]) -> int:
+    """Pack, compress and write one tile (its splats: held rows perm[start:stop] of tree
+    columns t, sorted, so the gather is near-sequential); returns its number of splats."""
+    t, name, start, stop, frac, folder = task
+    job = _JOB
+    rows = job.trees(t).perm[start:stop]
     blob, lo, hi = spz.pack_bounded(job.held, job.sh_degree, version=job.spz_version,
                                     fractional_bits=frac, level=job.level, rows=rows)
     data = gltf.tile_glb(blob, rows.shape[0], job.sh_degree, lo, hi)
@@ -246,25 +279,63 @@ def _write_tile(task: tuple[str, int, int, int, str]) -> int:
 
 
 def _build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,
-                parent_splats: int | None) -> lod.Node:
-    """The tile tree: the top levels expanded here until there is a subtree for each worker
-    (median splits make them equal), those grown by the workers (on disjoint ranges of the
-    shared input)."""
+                parent_splats: int | None, tree2: lod.TreeInput | None = None,
+                order: np.ndarray | None = None) -> tuple[lod.Node, int]:
+    """The tile tree and which tree columns hold it (0: ``tree``, 1: ``tree2``).
+
+    With ``tree2`` and ``order`` (shared, as long as ``tree``), the root is split by the
+    workers: here only its most prominent splats and its first median split are chosen; each
+    worker finishes the split of one half and moves that half into ``tree2`` while this
+    process moves the kept splats. Then the top levels are expanded here until there is a
+    subtree for each worker (median splits make them equal), and the workers grow those on
+    disjoint ranges. The tree is the one :func:`gsgeo.tiles.lod.build_tree` builds in one
+    process, node for node."""
     max_splats, parent_splats = lod.tree_limits(max_splats, parent_splats)
+    n = tree.perm.shape[0]
     root = lod.root_node(tree)
-    frontier = [(root, 0, tree.perm.shape[0])]
+    frontier = [(root, 0, n)]
+    t = 0
+    if tree2 is not None and order is not None and n > max_splats:
+        o, axes, halves = tree.first_split(0, n, parent_splats)
+        order[:n] = o
+        # with a half per worker, the workers go on to grow the root's children themselves
+        grow = (max_splats, parent_splats) if len(halves) >= nproc else None
+        tasks, first = [], 0
+        for lo, hi in halves:
+            tasks.append((parent_splats, lo, hi, axes[1:], n, first, grow))
+            first += sum(y > x for x, y in lod.part_ranges(hi - lo, len(axes) - 1))
+        done = imap(_finish_root_half, tasks)
+        kept = order[:parent_splats]
+        for src, dst in zip(tree.columns(), tree2.columns(), strict=True):
+            np.take(src, kept, out=dst[:parent_splats], mode="clip")
+        tree2.perm[:parent_splats].sort()
+        parts = sorted((p for half in done for p in half), key=lambda p: (p[0], p[1]))
+        tree, t = lod.TreeInput(tree2.pos[:, :n], tree2.radius[:n], tree2.key[:n],
+                                tree2.perm[:n]), 1
+        root.start, root.stop = 0, parent_splats
+        frontier = []
+        for lo, hi, blo, bhi, grown in parts:
+            child = grown or lod.Node(tree.perm[:0], blo, bhi, 1, f"0_{len(root.children)}")
+            root.children.append(child)
+            if grown is None:
+                frontier.append((child, parent_splats + lo, parent_splats + hi))
     while frontier and len(frontier) < nproc:
         big = max(range(len(frontier)), key=lambda i: frontier[i][2] - frontier[i][1])
         if frontier[big][2] - frontier[big][1] <= max_splats:
             break
         frontier += lod.expand(tree, *frontier.pop(big), max_splats, parent_splats)
     by_name = {nd.name: nd for nd, _, _ in frontier}
-    tasks = [(nd, a, b, max_splats, parent_splats) for nd, a, b in frontier]
+    tasks = [(t, nd, a, b, max_splats, parent_splats) for nd, a, b in frontier]
     for grown in imap(_grow_subtree, tasks):
         nd = by_name[grown.name]     # the worker's copy: take its subtree and range
         nd.children, nd.start, nd.stop = grown.children, grown.start, grown.stop
     lod.attach_indices(tree, root)
-    return root
+    return root, t
+
+
+def _shared_tree(count: int) -> lod.TreeInput:
+    return lod.TreeInput(shared_empty((3, count), np.float32), shared_empty(count, np.float32),
+                         shared_empty(count, np.float32), shared_empty(count, np.int32))
 
 
 def _held_arrays(count: int, sh_degree: int, spz_version: int) -> spz.SpzBytes:
@@ -326,10 +397,11 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
     tmp = _prepare_outdir(out, overwrite)
     try:
         held = _held_arrays(count, sh_degree, spz_version)
-        tree = lod.TreeInput(shared_empty((3, count), np.float32),
-                             shared_empty(count, np.float32), shared_empty(count, np.float32),
-                             shared_empty(count, np.int32))
-        _JOB = _Job(src, placement, held, tree, spz_version, sh_degree, level)
+        tree = _shared_tree(count)
+        tree2 = order = None
+        if nproc > 1 and count > max_splats:     # the root is split by the workers
+            tree2, order = _shared_tree(count), shared_empty(count, np.int32)
+        _JOB = _Job(src, placement, held, tree, spz_version, sh_degree, level, tree2, order)
         with pool(nproc) as imap:
             bar = Progress(progress, count, "reading")
             kept: list[tuple[int, int]] = []
@@ -361,12 +433,12 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
                 georef.warnings.append(
                     f"the scene reaches {extent:.0f} m from its centre: SPZ positions use "
                     f"{frac} fractional bits ({1000 / 2 ** frac:.2f} mm steps) instead of 12")
-            root = _build_tree(tree, imap, nproc, max_splats, parent_splats)
+            root, t = _build_tree(tree, imap, nproc, max_splats, parent_splats, tree2, order)
             nodes = [nd for nd in root.walk() if nd.index.shape[0]]
             (tmp / "tiles").mkdir()
             bar = Progress(progress, n, "writing")
             # biggest first so the last tiles to finish are small
-            tasks = [(nd.name, nd.start, nd.stop, frac, str(tmp / "tiles"))
+            tasks = [(t, nd.name, nd.start, nd.stop, frac, str(tmp / "tiles"))
                      for nd in sorted(nodes, key=lambda nd: -nd.index.shape[0])]
             for done in imap(_write_tile, tasks):
                 bar.update(done)

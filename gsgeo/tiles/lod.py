@@ -120,25 +120,29 @@ class TreeInput:
         return [(base + lo, base + hi) for lo, hi in parts if hi > lo]
 
 
+def part_ranges(m: int, levels: int) -> list[tuple[int, int]]:
+    """The parts (ranges of [0, m)) after ``levels`` rounds of median splits of every part
+    of at least two: they depend on the sizes only."""
+    parts = [(0, m)]
+    for _ in range(levels):
+        parts = [q for lo, hi in parts
+                 for q in (((lo, lo + (hi - lo) // 2), (lo + (hi - lo) // 2, hi))
+                           if hi - lo >= 2 else ((lo, hi),))]
+    return parts
+
+
 def split_parts(p: np.ndarray, rest: np.ndarray, axes: list[int]) -> list[tuple[int, int]]:
     """Split ``rest`` (column offsets into the centres ``p`` (3, M)) in place at its median
     along each of ``axes`` in turn, every part at each level; returns the parts as ranges of
-    ``rest``. Parts of one level are independent, so the halves of a first split may be
-    finished separately (in different processes) with the same result."""
-    parts = [(0, rest.shape[0])]
-    for ax in axes:
-        nxt = []
-        for lo, hi in parts:
-            if hi - lo < 2:
-                nxt.append((lo, hi))
-                continue
-            half = (hi - lo) // 2
-            sub = rest[lo:hi]
-            # np.take: a plain gather loop, faster than fancy indexing
-            rest[lo:hi] = np.take(sub, np.argpartition(np.take(p[ax], sub), half))
-            nxt += [(lo, lo + half), (lo + half, hi)]
-        parts = nxt
-    return parts
+    ``rest`` (:func:`part_ranges`). Parts of one level are independent, so the halves of a
+    first split may be finished separately (in different processes) with the same result."""
+    for level, ax in enumerate(axes):
+        for lo, hi in part_ranges(rest.shape[0], level):
+            if hi - lo >= 2:
+                sub = rest[lo:hi]
+                # np.take: a plain gather loop, faster than fancy indexing
+                rest[lo:hi] = np.take(sub, np.argpartition(np.take(p[ax], sub), (hi - lo) // 2))
+    return part_ranges(rest.shape[0], len(axes))
 
 
 def tie_breaker(idx: np.ndarray) -> np.ndarray:
