@@ -2,8 +2,9 @@
 
 Pipeline: bounds of the input (a sample of the centres) -> scene centre and root ENU frame ->
 blocks of splats turned into the root frame and quantised to SPZ bytes by worker processes
-into shared memory (about 100 bytes a splat at SH degree 3, the tree's inputs included) ->
-tile tree (the top levels in the parent, the subtrees in the workers) -> tiles packed,
+into shared memory (80 bytes a splat at SH degree 3, and 52 for the tree's columns) ->
+tile tree (the root's prominent splats and first split in the parent, the rest of the root's
+split and the subtrees in the workers) -> tiles packed,
 compressed and written by the workers into a temporary directory beside OUTDIR, which is
 renamed into place at the end.
 """
@@ -315,7 +316,8 @@ def _build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,
         root.start, root.stop = 0, parent_splats
         frontier = []
         for lo, hi, blo, bhi, grown in parts:
-            child = grown or lod.Node(tree.perm[:0], blo, bhi, 1, f"0_{len(root.children)}")
+            child = grown if grown is not None else \
+                lod.Node(tree.perm[:0], blo, bhi, 1, f"0_{len(root.children)}")
             root.children.append(child)
             if grown is None:
                 frontier.append((child, parent_splats + lo, parent_splats + hi))
