@@ -90,7 +90,7 @@ def reference_geojson(data, grid: bool = False) -> dict:
     import json
     import math
 
-    from gsgeo.export.geojson import crs_urn
+    from gsgeo.export.geojson import _header
 
     def rows(table):
         cols = []
@@ -133,17 +133,7 @@ def reference_geojson(data, grid: bool = False) -> dict:
                 geom = {"type": "Point", "coordinates": [round(v, 4) for v in cc]}
             feats.append({"type": "Feature", "id": p["point_id"], "geometry": geom,
                           "properties": {"layer": "check_points", **p, **meta}})
-    doc: dict = {"type": "FeatureCollection"}
-    if grid:
-        doc["crs"] = {"type": "name", "properties": {"name": crs_urn(data.crs)}}
-        doc["rfc7946"] = False
-        doc["description"] = (
-            f"Legacy GeoJSON with grid coordinates (easting, northing, height) in {data.crs} and "
-            "a crs member; NOT RFC 7946. Use the default GeoJSON export for RFC 7946 readers.")
-    else:
-        doc["description"] = (
-            "RFC 7946: longitude, latitude (degrees) and ellipsoidal height (m) on WGS 84; grid "
-            f"coordinates in {data.crs} in the properties.")
+    doc = _header(data, grid)    # the header members and their wording: the writer's own
     doc["features"] = feats
     return json.loads(json.dumps(doc, allow_nan=False))
 
