@@ -1,27 +1,61 @@
 #!/usr/bin/env bash
-# Install gsgeo and everything it needs on a fresh Debian machine with Python >= 3.11 and Node.js.
+# Install gsgeo into a virtual environment (.venv, reused when present) on a Debian 12 machine
+# with python3 (>= 3.11) and, where missing, installs python3-venv and Node.js's npm through apt.
 #   bash scripts/install.sh          the package, its run-time dependencies and the web client
-#   bash scripts/install.sh --test   the same plus the test tools and Debian's chromium
+#   bash scripts/install.sh --test   the same plus the test tools and Debian's chromium and proj-data
+# Afterwards: `.venv/bin/gsgeo ...`, or `. .venv/bin/activate` once and then `gsgeo ...`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 test_deps=0
-[ "${1:-}" = "--test" ] && test_deps=1
+case "${1:-}" in
+    "") ;;
+    --test) test_deps=1 ;;
+    *) echo "usage: bash scripts/install.sh [--test]" >&2; exit 2 ;;
+esac
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
+apt_updated=0
+apt_install() {
+    echo "installing Debian's $* through apt" >&2
+    if [ "$apt_updated" = 0 ]; then as_root apt-get update -qq; apt_updated=1; fi
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$@" >/dev/null
+}
+
+# The interpreter: python3 (Debian 12 has no `python`), at least 3.11.
+PYTHON=${PYTHON:-python3}
+if ! command -v "$PYTHON" >/dev/null 2>&1; then
+    apt_install python3
+fi
+if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+    echo "gsgeo needs Python >= 3.11; $PYTHON is $("$PYTHON" -V 2>&1)" >&2
+    exit 2
+fi
+
+# A virtual environment: Debian's interpreter is externally managed (PEP 668) and refuses pip.
+if ! .venv/bin/python -c 'import sys' >/dev/null 2>&1; then
+    # Debian splits venv's pip bootstrap (ensurepip) into python3-venv.
+    if ! "$PYTHON" -c 'import ensurepip, venv' >/dev/null 2>&1; then
+        apt_install python3-venv
+    fi
+    rm -rf .venv
+    "$PYTHON" -m venv .venv
+fi
+PIP=(.venv/bin/python -m pip install --quiet --disable-pip-version-check)
 
 if [ "$test_deps" = 1 ]; then
-    python -m pip install --quiet --disable-pip-version-check -e '.[test]'
-    if ! command -v chromium >/dev/null 2>&1; then
-        echo "installing Debian's chromium for the browser tests" >&2
-        as_root apt-get update -qq
-        as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
-    fi
+    "${PIP[@]}" -e '.[test]'
+    missing=()
+    command -v chromium >/dev/null 2>&1 || missing+=(chromium)
+    # egm96_15.gtx, the one geoid Debian ships, for the vertical-datum tests.
+    [ -f /usr/share/proj/egm96_15.gtx ] || missing+=(proj-data)
+    if [ "${#missing[@]}" -gt 0 ]; then apt_install "${missing[@]}"; fi
 else
-    python -m pip install --quiet --disable-pip-version-check -e .
+    "${PIP[@]}" -e .
 fi
 
 # The CesiumJS client: cesium is pinned in web/package-lock.json; nothing is fetched at run time.
 if [ -f web/package.json ]; then
+    command -v npm >/dev/null 2>&1 || apt_install npm
     (cd web && npm ci --no-audit --no-fund --loglevel=error)
 fi
