@@ -35,7 +35,7 @@ LAT, LON, H = 40.01609, -83.02341, 210.0
 
 
 def _enu_basis(lat, lon):
-    """Rows east, north, up (DESIGN.md 'Frames and conventions')."""
+    """Rows east, north, up (docs/architecture.md, 'Frames and conventions')."""
     p, l = np.radians(lat), np.radians(lon)
     return np.array([[-np.sin(l), np.cos(l), 0],
                      [-np.sin(p) * np.cos(l), -np.sin(p) * np.sin(l), np.cos(p)],

@@ -6,7 +6,7 @@ import numpy as np
 
 from gsgeo.tiles.splats import Splats, quat_to_matrix
 
-# SPZ quantisation bounds (DESIGN.md "SPZ"), with a little slack for float32 arithmetic
+# SPZ quantisation bounds (docs/architecture.md, "SPZ"), with a little slack for float32 arithmetic
 TOL_POS_M = 0.5e-3
 TOL_LOG_SCALE = 0.5 / 16 + 1e-4
 TOL_ALPHA = 0.5 / 255 + 1e-5

@@ -1,6 +1,6 @@
 """Grid coordinates (easting, northing, height) with covariance, from ECEF points.
 
-Path of a point (DESIGN.md, "PROJ facts"):
+Path of a point (docs/architecture.md, "PROJ"):
 
 1. ECEF on the scene's geocentric CRS (``source_crs``) -> longitude, latitude and
    ellipsoidal height h on the same datum (a conversion).

@@ -1,6 +1,6 @@
 """gsgeo.export: measured points, lines and polygons to GeoPackage, GeoJSON and CSV.
 
-One schema for all formats (DESIGN.md, "Point schema"); see `write_measurements`.
+One schema for all formats (the README's "Point schema"); see `write_measurements`.
 `gsgeo.export.features` holds the CRS-free length/area maths with propagated sigmas.
 """
 

@@ -1,7 +1,7 @@
 """CSV writer: one row per measured point, a header row, the point schema in a fixed order.
 
 Column order (CSV_COLUMNS): point_id, easting, northing, height, code, then the rest of the
-point schema in DESIGN.md order (description, height_type, vertical_datum, crs, sigma_e, ...,
+point schema in its documented order (description, height_type, vertical_datum, crs, sigma_e, ...,
 measured_at). Every row states its CRS, height type and vertical datum, so the file stands
 alone. UTF-8 without BOM, comma separated, "\\n" line ends, empty field = unknown (null).
 

@@ -31,7 +31,7 @@ from gsgeo.export.features import (
     polygon_measures_many,
 )
 
-#: Column types of the point schema (DESIGN.md, "Point schema"): 'str', 'float' or 'int'.
+#: Column types of the point schema (the README's "Point schema"): 'str', 'float' or 'int'.
 POINT_TYPES: dict[str, str] = {k: "float" for k in RECORD_KEYS}
 POINT_TYPES.update(dict.fromkeys(
     ("point_id", "code", "description", "height_type", "vertical_datum", "crs", "operation",

@@ -1,4 +1,4 @@
-"""Accuracy of measured points against check points (DESIGN.md, "Quality statistics").
+"""Accuracy of measured points against check points (docs/architecture.md, "Quality statistics").
 
 Differences are measured minus check, in the grid CRS (metres). Horizontal:
 RMSE_H = sqrt(RMSE_E^2 + RMSE_N^2); vertical RMSE_V from the height differences dH;

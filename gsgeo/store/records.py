@@ -1,6 +1,6 @@
 """What a project holds, as plain records a storage backend reads and writes.
 
-Rays are kept exactly as the session-JSON ray dicts of DESIGN.md ("Session JSON"); they are
+Rays are kept exactly as the session-JSON ray dicts (README, "Session JSON"); they are
 the source of truth. The solved result of a point (``result``: the JSON of
 ``Measurement.to_dict()``, ``record``: the point-schema row) is derived data, recomputed from
 the rays whenever the project's CRS, vertical datum, source CRS or sigma_px changes.

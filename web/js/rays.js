@@ -1,4 +1,4 @@
-// One aim = one ray (DESIGN.md "Session JSON"): the camera centre and the direction through the
+// One aim = one ray (README, "Session JSON"): the camera centre and the direction through the
 // clicked pixel in rendered ECEF, the angular size of that pixel, and the tileset's modelMatrix.
 
 const Cesium = globalThis.Cesium;
