@@ -84,6 +84,10 @@ def _compressed_layout(path, fmt, elements, header_end) -> CompressedLayout:
         [n for n in _PACKED if n not in vdt.names]
     if missing:
         raise InputError(f"{path}: compressed PLY lacks {', '.join(missing)}")
+    not_u32 = [n for n in _PACKED if vdt[n] != np.dtype("<u4")]
+    if not_u32:
+        raise InputError(f"{path}: compressed PLY properties {', '.join(not_u32)} must be "
+                         "uint (32-bit)")
     if n_chunks * 256 < count:
         raise InputError(f"{path}: {n_chunks} chunks cannot hold {count} splats")
     sh_dt, n_rest = None, 0
@@ -93,6 +97,9 @@ def _compressed_layout(path, fmt, elements, header_end) -> CompressedLayout:
         if sh_count != count or n_rest % 3 or n_rest // 3 not in SH_DEGREE_OF:
             raise InputError(f"{path}: the sh element has {n_rest} properties for {sh_count} "
                              f"splats; expected 9, 24 or 45 for {count}")
+        absent = [f"f_rest_{i}" for i in range(n_rest) if f"f_rest_{i}" not in sh_dt.names]
+        if absent:
+            raise InputError(f"{path}: the sh element lacks {', '.join(absent[:3])}")
     return CompressedLayout(path, count, cdt, offs["chunk"], n_chunks, vdt, offs["vertex"],
                             sh_dt, offs.get("sh", 0), SH_DEGREE_OF[n_rest // 3], n_rest)
 
@@ -198,6 +205,71 @@ class PlyLayout:
         return os.path.getsize(self.path)
 
 
+#: A PLY header longer than this is refused (3DGS headers are a few kilobytes).
+MAX_HEADER_BYTES = 1 << 20
+_FORMATS = ("binary_little_endian", "binary_big_endian", "ascii")
+
+
+def _header_elements(path: Path, f) -> tuple[str, list[tuple[str, int, list[tuple[str, str]]]]]:
+    """Parse a PLY header from after its magic line: (format, [(element, count, [(property,
+    type or "list")])]). Every malformed line is an InputError naming it."""
+    fmt = None
+    elements: list[tuple[str, int, list[tuple[str, str]]]] = []
+    lineno = 1
+    while True:
+        line = f.readline(MAX_HEADER_BYTES)
+        lineno += 1
+        if not line:
+            raise InputError(f"{path}: PLY header has no end_header")
+        if f.tell() > MAX_HEADER_BYTES:
+            raise InputError(f"{path}: PLY header is longer than {MAX_HEADER_BYTES} bytes")
+        text = line.decode("ascii", "replace")
+        words = text.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue     # comments may hold any bytes
+        where = f"{path}: PLY header line {lineno}"
+        if "\ufffd" in text:
+            raise InputError(f"{where}: not ASCII")
+        key = words[0]
+        if key == "end_header":
+            break
+        if key == "format":
+            if len(words) != 3 or words[1] not in _FORMATS:
+                raise InputError(f"{where}: expected 'format ascii|binary_little_endian|"
+                                 f"binary_big_endian 1.0', got {text.strip()[:80]!r}")
+            fmt = words[1]
+        elif key == "element":
+            if len(words) != 3 or not (words[2].isascii() and words[2].isdigit()):
+                raise InputError(f"{where}: expected 'element NAME COUNT' with a count of 0 "
+                                 f"or more, got {text.strip()[:80]!r}")
+            elements.append((words[1], int(words[2]), []))
+        elif key == "property":
+            if not elements:
+                raise InputError(f"{where}: property before any element")
+            props = elements[-1][2]
+            if len(words) == 5 and words[1] == "list":
+                if words[2] not in _TYPES or words[3] not in _TYPES:
+                    raise InputError(f"{where}: unknown PLY list types {words[2]!r}, "
+                                     f"{words[3]!r}")
+                entry = (words[4], "list")
+            elif len(words) == 3:
+                if words[1] not in _TYPES:
+                    raise InputError(f"{where}: unknown PLY property type {words[1]!r}")
+                entry = (words[2], words[1])
+            else:
+                raise InputError(f"{where}: expected 'property TYPE NAME' or 'property list "
+                                 f"COUNT_TYPE TYPE NAME', got {text.strip()[:80]!r}")
+            if any(n == entry[0] for n, _ in props):
+                raise InputError(f"{where}: property {entry[0]!r} appears twice in element "
+                                 f"{elements[-1][0]!r}")
+            props.append(entry)
+        else:
+            raise InputError(f"{where}: unknown keyword {key[:40]!r}")
+    if fmt is None:
+        raise InputError(f"{path}: PLY header has no format line")
+    return fmt, elements
+
+
 def read_layout(path: str | os.PathLike) -> PlyLayout | CompressedLayout:
     """Parse the header of a 3DGS PLY and check its vertex properties."""
     path = Path(path)
@@ -206,35 +278,10 @@ def read_layout(path: str | os.PathLike) -> PlyLayout | CompressedLayout:
     except OSError as exc:
         raise InputError(f"{path}: cannot open ({exc.strerror})") from None
     with f:
-        if f.readline().strip() != b"ply":
+        if f.readline(16).strip() != b"ply":
             raise InputError(f"{path}: not a PLY file (no 'ply' magic line)")
-        fmt = None
-        elements: list[tuple[str, int, list[tuple[str, str]]]] = []
-        while True:
-            line = f.readline()
-            if not line:
-                raise InputError(f"{path}: PLY header has no end_header")
-            words = line.decode("ascii", "replace").split()
-            if not words or words[0] in ("comment", "obj_info"):
-                continue
-            if words[0] == "end_header":
-                break
-            if words[0] == "format":
-                fmt = words[1]
-            elif words[0] == "element":
-                elements.append((words[1], int(words[2]), []))
-            elif words[0] == "property":
-                if not elements:
-                    raise InputError(f"{path}: PLY property before any element")
-                if words[1] == "list":
-                    elements[-1][2].append((words[-1], "list"))
-                else:
-                    if words[1] not in _TYPES:
-                        raise InputError(f"{path}: unknown PLY property type {words[1]!r}")
-                    elements[-1][2].append((words[2], words[1]))
+        fmt, elements = _header_elements(path, f)
         header_end = f.tell()
-    if fmt not in ("binary_little_endian", "binary_big_endian", "ascii"):
-        raise InputError(f"{path}: unsupported PLY format {fmt!r}")
     offset = header_end
     vertex = None
     for name, count, props in elements:
@@ -270,11 +317,17 @@ def read_layout(path: str | os.PathLike) -> PlyLayout | CompressedLayout:
                          f"(missing {', '.join(missing_rest[:3])})")
     order = "<" if fmt == "binary_little_endian" else ">"
     dtype = np.dtype([(n, order + _TYPES[t]) for n, t in props])
+    size = os.path.getsize(path)
     if fmt != "ascii":
         need = offset + count * dtype.itemsize
-        if os.path.getsize(path) < need:
-            raise InputError(f"{path}: file is truncated ({os.path.getsize(path)} bytes, the "
-                             f"header announces {count} vertices needing {need})")
+    else:
+        # every ASCII value takes a character and a separator at least
+        need = header_end + sum(c * 2 * len(p) for _, c, p in
+                                elements[:1 + [e[0] for e in elements].index("vertex")]) - 1
+    if size < need:
+        raise InputError(f"{path}: file is truncated ({size} bytes, the header announces "
+                         f"{count} vertices needing {'at least ' if fmt == 'ascii' else ''}"
+                         f"{need})")
     return PlyLayout(path, fmt, count, dtype, offset, SH_DEGREE_OF[n_rest // 3],
                      "f_dc" if has_dc else "rgb", n_rest)
 
@@ -333,8 +386,11 @@ def iter_records(layout: PlyLayout, block: int = 262_144) -> Iterator[np.ndarray
 
 def read_ascii_records(layout: PlyLayout) -> np.ndarray:
     """All vertex records of an ASCII PLY (rare for 3DGS: read whole, with plyfile)."""
-    from plyfile import PlyData
-    return PlyData.read(str(layout.path))["vertex"].data
+    from plyfile import PlyData, PlyParseError
+    try:
+        return PlyData.read(str(layout.path))["vertex"].data
+    except (PlyParseError, ValueError, OverflowError) as exc:   # UnicodeDecodeError too
+        raise InputError(f"{layout.path}: malformed ASCII PLY body ({exc})") from None
 
 
 class RecordReader:

@@ -8,6 +8,7 @@ opening (binary PLY ranges are read with pread on a descriptor each process open
 
 from __future__ import annotations
 
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -114,6 +115,14 @@ def open_source(path: str | Path, block: int = 16_384) -> Source:
     """Open a .ply or .spz input; ``block`` is the largest range a binary PLY read serves
     from its buffer without reallocating."""
     path = Path(path)
+    if "\0" in str(path):
+        raise InputError("the input path holds a NUL character")
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot open ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{path}: not a regular file")
     suffix = path.suffix.lower()
     if suffix == ".spz":
         try:
