@@ -70,7 +70,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="worker processes (default: the number of CPUs; inputs under "
                         "200 000 splats use one)")
     p.add_argument("--overwrite", action="store_true",
-                   help="replace OUTDIR if it exists (it is swapped only once complete)")
+                   help="replace OUTDIR if it is a tileset written by gsgeo tiles (it is "
+                        "swapped only once complete)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(run=run)
@@ -133,13 +134,17 @@ def _run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise InputError("--workers must be at least 1")
     georef = georeference_from_args(args)
-    for w in georef.warnings:
-        print(f"gsgeo tiles: warning: {w}", file=sys.stderr)
-    georef.warnings.clear()
+
+    def started() -> None:
+        # the georeference's warnings, once the input and the output are known to be usable
+        for w in georef.warnings:
+            print(f"gsgeo tiles: warning: {w}", file=sys.stderr)
+        georef.warnings.clear()
+
     summary = build_tileset(args.input, args.output, georef, max_splats=args.max_splats,
                             spz_version=args.spz_version, level=args.level,
                             workers=args.workers, overwrite=args.overwrite,
-                            progress=None if args.quiet else sys.stderr)
+                            progress=None if args.quiet else sys.stderr, on_start=started)
     for w in summary.warnings:
         print(f"gsgeo tiles: warning: {w}", file=sys.stderr)
     if args.json:

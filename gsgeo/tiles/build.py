@@ -15,9 +15,9 @@ import json
 import os
 import shutil
 import sys
-import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TextIO
@@ -25,7 +25,8 @@ from typing import TextIO
 import numpy as np
 
 from gsgeo.errors import InputError
-from gsgeo.tiles import gltf, lod, spz
+from gsgeo.tiles import gltf, lod, spz, swap
+from gsgeo.tiles import outdir as outdir_mod
 from gsgeo.tiles.georef import Georeference, Placement, ecef_to_geodetic
 from gsgeo.tiles.source import Source, open_source
 from gsgeo.tiles.workers import cpu_count, pool, shared_empty
@@ -110,30 +111,34 @@ class Progress:
             self.stream.flush()
 
 
-def _prepare_outdir(outdir: Path, overwrite: bool) -> Path:
-    if outdir.exists() and not outdir.is_dir():
-        raise InputError(f"{outdir} exists and is not a directory")
-    if outdir.exists() and any(outdir.iterdir()) and not overwrite:
-        raise InputError(f"{outdir} exists and is not empty; pass --overwrite to replace it")
-    outdir.parent.mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=f".{outdir.name}.", suffix=".tmp", dir=outdir.parent))
+def _prepare_outdir(out: Path, outdir: Path) -> Path:
+    """Create the parent of ``out`` (OUTDIR ``outdir`` checked and resolved), remove stale
+    temporaries of killed runs beside it and make this run's temporary directory there."""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        swap.clean_stale(out.parent)
+        return swap.make_temp(out)
+    except FileExistsError:
+        raise InputError(f"-o {outdir}: {out.parent} is not a directory") from None
+    except OSError as exc:
+        raise InputError(f"-o {outdir}: cannot write a directory in {out.parent} "
+                         f"({exc.strerror})") from None
 
 
 def _commit(tmp: Path, outdir: Path) -> None:
-    """Swap the finished temporary directory into place; an old OUTDIR is removed only after."""
+    """Mark the finished temporary directory as ours and swap it into place (an old OUTDIR
+    is removed only after; see gsgeo.tiles.swap)."""
     # mkdtemp makes the directory 0700; a tileset is served and shared like any output
     # directory, so give it the mode a plain mkdir would (0777 less the umask).
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)
-    old = None
-    if outdir.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{outdir.name}.", suffix=".old", dir=outdir.parent))
-        os.rmdir(old)
-        os.replace(outdir, old)
-    os.replace(tmp, outdir)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+    try:
+        outdir_mod.write_marker(tmp)
+        swap.commit(tmp, outdir)
+    except OSError as exc:
+        raise InputError(f"{outdir}: cannot put the finished tileset in place "
+                         f"({exc.strerror})") from None
 
 
 def _colmajor(m: np.ndarray) -> list[float]:
@@ -353,23 +358,27 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
                   georef: Georeference | None = None, *, max_splats: int = 131_072,
                   parent_splats: int | None = None, spz_version: int = 3, level: int = 1,
                   workers: int | None = None, overwrite: bool = False,
-                  progress: TextIO | None = sys.stderr, block: int = BLOCK) -> Summary:
+                  progress: TextIO | None = sys.stderr, block: int = BLOCK,
+                  on_start: Callable[[], None] | None = None) -> Summary:
     """Convert a 3DGS PLY or SPZ file into a tileset directory ``outdir``.
 
     ``level`` is the gzip level of the SPZ payloads (1 fastest, 9 smallest); ``workers``
     the number of worker processes (default: the CPUs this process may use; inputs under
     :data:`PARALLEL_MIN_SPLATS` splats are done in this process). The result is written to
-    a temporary directory beside ``outdir`` and renamed into place when complete. Calls from
-    several threads run one after the other.
+    a temporary directory beside ``outdir`` and swapped into place when complete; an
+    existing ``outdir`` must be empty, or with ``overwrite`` a tileset gsgeo wrote (see
+    :mod:`gsgeo.tiles.outdir`). ``on_start`` is called once the input is open and the output
+    checked, before the splats are read. Calls from several threads run one after the other.
     """
     with _BUILD_LOCK:
         return _build(input_path, outdir, georef, max_splats=max_splats,
                       parent_splats=parent_splats, spz_version=spz_version, level=level,
-                      workers=workers, overwrite=overwrite, progress=progress, block=block)
+                      workers=workers, overwrite=overwrite, progress=progress, block=block,
+                      on_start=on_start)
 
 
 def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version, level,
-           workers, overwrite, progress, block) -> Summary:
+           workers, overwrite, progress, block, on_start) -> Summary:
     global _JOB
     t0 = time.monotonic()
     src_path = Path(input_path)
@@ -383,21 +392,24 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
         raise InputError("--max-splats must be at least 1000")
     if block < 1:
         raise InputError("block must be positive")
+    dest = outdir_mod.check_output(src_path, out, overwrite)
     src = open_source(src_path, block)
     count, sh_degree = src.count, src.sh_degree
     if count == 0:
         raise InputError(f"{src_path}: the file holds no splats")
     if count >= 2**31:
         raise InputError(f"{src_path}: {count} splats; at most 2**31 - 1 are supported")
-    lo, hi, n_finite = src.bounds()
-    if n_finite == 0:
-        raise InputError(f"{src_path}: no splat has finite coordinates")
-    placement = georef.placement(lo, hi)
-    nproc = workers or cpu_count()
-    if workers is None and count < PARALLEL_MIN_SPLATS:
-        nproc = 1
-    tmp = _prepare_outdir(out, overwrite)
+    tmp = _prepare_outdir(dest, out)
     try:
+        if on_start is not None:
+            on_start()
+        lo, hi, n_finite = src.bounds()
+        if n_finite == 0:
+            raise InputError(f"{src_path}: no splat has finite coordinates")
+        placement = georef.placement(lo, hi)
+        nproc = workers or cpu_count()
+        if workers is None and count < PARALLEL_MIN_SPLATS:
+            nproc = 1
         held = _held_arrays(count, sh_degree, spz_version)
         tree = _shared_tree(count)
         tree2 = order = None
@@ -465,7 +477,7 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
                                           "operation": placement.operation,
                                           "splats": n, "sh_degree": sh_degree,
                                           "root_frame": "ENU at the scene centre (WGS 84)"}})
-            _commit(tmp, out)
+            _commit(tmp, dest)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

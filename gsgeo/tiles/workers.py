@@ -33,7 +33,27 @@ def can_fork() -> bool:
     return "fork" in multiprocessing.get_all_start_methods()
 
 
-def _quiet_child() -> None:
+#: prctl option: the signal a process gets when its parent dies (linux/prctl.h).
+PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(parent: int) -> None:
+    """Have the kernel SIGKILL this process as soon as its parent ``parent`` dies (Linux), so a
+    killed build leaves no workers behind writing into its temporary directory or printing
+    tracebacks about the parent's pipes. Elsewhere a no-op."""
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):  # pragma: no cover - not Linux
+        return
+    prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong,
+                      ctypes.c_ulong]
+    prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent:    # the parent died before the request took effect
+        os._exit(1)
+
+
+def _quiet_child(parent: int) -> None:
+    die_with_parent(parent)
     # Ctrl-C reaches the whole process group: the parent handles it and stops the pool
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     keep_freed_memory()
@@ -96,7 +116,7 @@ def pool(processes: int) -> Iterator[Imap]:
         yield Imap()
         return
     ctx = multiprocessing.get_context("fork")
-    p = ctx.Pool(processes, initializer=_quiet_child)
+    p = ctx.Pool(processes, initializer=_quiet_child, initargs=(os.getpid(),))
     try:
         yield Imap(p)
         p.close()
