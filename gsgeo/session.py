@@ -1,21 +1,30 @@
-"""The session JSON of DESIGN.md ("Interfaces"): rays of measured points, lines and polygons.
+"""The session JSON (README, "Session JSON"): rays of measured points, lines and polygons.
 
 `load_session` / `parse_session` validate the whole document and raise
 :class:`~gsgeo.errors.InputError` with the JSON path of the first problem
 (e.g. ``points[2].rays[0].direction``), so a surveyor can find it in the file.
+
+The file is read with bounds: at most ``MAX_SESSION_BYTES``, strict UTF-8 JSON parsed by orjson
+(nesting deeper than 1024 levels, numbers beyond a 64-bit float, NaN / Infinity literals and
+unpaired surrogates are refused with their line and column). Ranges of sigma_px, ifov, origins
+and directions and the id rule come from :mod:`gsgeo.limits`.
 """
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 
+from gsgeo import limits
 from gsgeo.errors import InputError
+
+#: Largest session file read, bytes (10 000 points of 10 rays take about 5 MB).
+MAX_SESSION_BYTES = 200 * 1024 * 1024
 
 IDENTITY16 = (1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0)
 
@@ -75,30 +84,63 @@ class Session:
 
 
 def load_session(path: str | Path) -> Session:
-    """Read and validate a session JSON file."""
+    """Read and validate a session JSON file (at most MAX_SESSION_BYTES, UTF-8)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        with open(p, "rb") as fh:
+            data = fh.read(MAX_SESSION_BYTES + 1)  # bounded even for /dev/zero or a pipe
     except FileNotFoundError:
         raise InputError(f"{p}: no such file") from None
     except IsADirectoryError:
         raise InputError(f"{p}: is a directory, not a session JSON file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{p}: cannot be read as text: {exc}") from None
+    except OSError as exc:
+        raise InputError(f"{p}: cannot be read: {exc.strerror or exc}") from None
+    if len(data) > MAX_SESSION_BYTES:
+        raise InputError(f"{p}: larger than {MAX_SESSION_BYTES // 2**20} MiB; not a session file")
     try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{p}: not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
-    try:
-        return parse_session(doc)
+        return parse_session(parse_json(data))
     except InputError as exc:
         raise InputError(f"{p}: {exc}") from None
 
 
+def parse_json(data: bytes | str) -> Any:
+    """Decode JSON text strictly and with bounded depth (orjson), or InputError saying what and
+    where: nesting deeper than 1024 levels, a number beyond a 64-bit float, NaN / Infinity,
+    invalid UTF-8 or unpaired surrogates. A leading UTF-8 byte order mark is skipped."""
+    if isinstance(data, str):
+        data = data.encode("utf-8", "surrogatepass")
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    try:
+        return orjson.loads(data)
+    except orjson.JSONDecodeError as exc:
+        what = {"depth limit exceeded": "JSON nested more than 1024 levels deep",
+                "number is infinity when parsed as double": "a number too large for a 64-bit float",
+                }.get(exc.msg, f"not valid JSON: {exc.msg}")
+        raise InputError(f"{what} at line {exc.lineno}, column {exc.colno}") from None
+
+
+def _describe(value: Any) -> str:
+    """A short description of a JSON value for a message (never the whole of a large value)."""
+    if isinstance(value, bool) or value is None:
+        return {True: "true", False: "false", None: "null"}[value]
+    if isinstance(value, str):
+        return repr(value[:30] + ("..." if len(value) > 30 else ""))
+    if isinstance(value, list):
+        return f"a list of {len(value)} items"
+    if isinstance(value, dict):
+        return "an object"
+    return str(value)[:30]
+
+
 def _number(value: Any, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"{where}: expected a number, got {json.dumps(value)[:40]}")
-    v = float(value)
+        raise InputError(f"{where}: expected a number, got {_describe(value)}")
+    try:
+        v = float(value)
+    except OverflowError:
+        raise InputError(f"{where}: expected a finite number, got an integer too large "
+                         "for a float") from None
     if not math.isfinite(v):
         raise InputError(f"{where}: expected a finite number")
     return v
@@ -126,14 +168,16 @@ def parse_ray(doc: Any, where: str = "ray") -> Ray:
         if key not in doc:
             raise InputError(f"{where}: missing '{key}'")
     origin = _vector(doc["origin"], 3, f"{where}.origin")
+    problem = limits.origin_problem(origin)
+    if problem:
+        raise InputError(f"{where}.origin: {problem}")
     direction = _vector(doc["direction"], 3, f"{where}.direction")
-    if not np.any(direction != 0):
-        raise InputError(f"{where}.direction: is a zero vector")
+    problem = limits.direction_problem(direction)
+    if problem:
+        raise InputError(f"{where}.direction: {problem}")
     ifov = None
     if doc.get("ifov") is not None:
-        ifov = _number(doc["ifov"], f"{where}.ifov")
-        if ifov <= 0:
-            raise InputError(f"{where}.ifov: must be a positive angle in radians per pixel")
+        ifov = limits.ifov(_number(doc["ifov"], f"{where}.ifov"), f"{where}.ifov")
     pixel = viewport = mm = None
     if doc.get("pixel") is not None:
         pixel = tuple(_vector(doc["pixel"], 2, f"{where}.pixel").tolist())
@@ -155,12 +199,10 @@ def parse_point(doc: Any, where: str = "point") -> SessionPoint:
         raise InputError(f"{where}: expected an object with id and rays")
     if "id" not in doc:
         raise InputError(f"{where}: missing 'id'")
-    pid = _text(doc["id"], f"{where}.id")
-    if not pid.strip():
-        raise InputError(f"{where}.id: must not be empty")
+    pid = limits.id_text(doc["id"], f"{where}.id")
     rays = doc.get("rays")
     if not isinstance(rays, list):
-        raise InputError(f"{where}.rays: expected a list of rays")
+        raise InputError(f"{where}.rays: expected a list of rays, got {_describe(rays)}")
     return SessionPoint(
         id=pid,
         rays=[parse_ray(r, f"{where}.rays[{i}]") for i, r in enumerate(rays)],
@@ -170,9 +212,11 @@ def parse_point(doc: Any, where: str = "point") -> SessionPoint:
 
 
 def _features(doc: Any, key: str) -> list[Feature]:
-    items = doc.get(key) or []
+    items = doc.get(key)
+    if items is None:
+        return []
     if not isinstance(items, list):
-        raise InputError(f"{key}: expected a list")
+        raise InputError(f"{key}: expected a list, got {_describe(items)}")
     out = []
     for i, item in enumerate(items):
         where = f"{key}[{i}]"
@@ -181,8 +225,8 @@ def _features(doc: Any, key: str) -> list[Feature]:
         pts = item.get("points")
         if not isinstance(pts, list) or not pts:
             raise InputError(f"{where}.points: expected a list of point ids")
-        out.append(Feature(_text(item["id"], f"{where}.id"),
-                           [_text(p, f"{where}.points[{j}]") for j, p in enumerate(pts)]))
+        out.append(Feature(limits.id_text(item["id"], f"{where}.id"),
+                           [limits.id_text(p, f"{where}.points[{j}]") for j, p in enumerate(pts)]))
     return out
 
 
@@ -192,7 +236,8 @@ def parse_session(doc: Any) -> Session:
         raise InputError("the session must be a JSON object with a 'points' list")
     pts = doc.get("points")
     if not isinstance(pts, list):
-        raise InputError("points: expected a list of points")
+        raise InputError("points: expected a list of points"
+                         + ("" if pts is None else f", got {_describe(pts)}"))
     points = [parse_point(p, f"points[{i}]") for i, p in enumerate(pts)]
     seen: set[str] = set()
     for i, p in enumerate(points):
@@ -201,9 +246,7 @@ def parse_session(doc: Any) -> Session:
         seen.add(p.id)
     sigma_px = 1.0
     if doc.get("sigma_px") is not None:
-        sigma_px = _number(doc["sigma_px"], "sigma_px")
-        if sigma_px <= 0:
-            raise InputError("sigma_px: must be a positive number of pixels")
+        sigma_px = limits.sigma_px(_number(doc["sigma_px"], "sigma_px"))
     return Session(
         points=points,
         source_crs=_text(doc.get("source_crs"), "source_crs", "EPSG:4978") or "EPSG:4978",

@@ -10,7 +10,6 @@ millimetres of the origin and the ENU solution is well conditioned.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -18,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gsgeo import limits
 from gsgeo.crs.frames import EnuFrame
 from gsgeo.crs.grid import GridPoint, to_grid, to_grid_many
 from gsgeo.crs.modelmatrix import rendered_to_georeferenced
@@ -28,7 +28,7 @@ from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.session import Session, SessionPoint, ray_arrays
 from gsgeo.solve import IntersectionResult, intersect
 
-#: Keys of the point schema (DESIGN.md), in order.
+#: Keys of the point schema (the README's CSV columns), in order.
 RECORD_KEYS = (
     "point_id", "code", "description", "easting", "northing", "height", "height_type",
     "vertical_datum", "crs", "sigma_e", "sigma_n", "sigma_h", "cov_ee", "cov_en", "cov_eh",
@@ -75,7 +75,7 @@ class Measurement:
         return int((~self.excluded).sum())
 
     def record(self) -> dict:
-        """The point-schema row of DESIGN.md, keys in order; grid fields None without a grid."""
+        """The point-schema row, keys in order; grid fields None without a grid."""
         g = self.grid
         s = self.solution
         rec = dict.fromkeys(RECORD_KEYS)
@@ -205,6 +205,14 @@ def measure_point(
     mask = _exclusion_mask(exclude, n, point.id)
     keep = ~mask
     o, d, similar = rendered_to_georeferenced(o_r, d_r, [r.model_matrix for r in point.rays])
+    for i in range(n):  # a model_matrix can move a sane ray out of range
+        problem = limits.origin_problem(o[i]) if np.all(np.isfinite(o[i])) else "not finite"
+        if problem:
+            raise InputError(f"point '{point.id}': ray {i + 1}: the georeferenced origin (after "
+                             f"the inverse of its model_matrix) is {problem}")
+        if not (np.all(np.isfinite(d[i])) and np.any(d[i] != 0)):
+            raise InputError(f"point '{point.id}': ray {i + 1}: the direction cannot be "
+                             "georeferenced through its model_matrix")
     warnings: list[str] = []
     if not similar:
         warnings.append(
@@ -294,8 +302,7 @@ def measure_session(
     vertical = vertical if vertical is not None else session.vertical
     src = source_crs or session.source_crs or "EPSG:4978"
     s_px = sigma_px if sigma_px is not None else session.sigma_px
-    if s_px is None or not (isinstance(s_px, (int, float)) and math.isfinite(s_px) and s_px > 0):
-        raise InputError(f"sigma_px must be a positive number of pixels, got {s_px!r}")
+    s_px = limits.sigma_px(s_px)
     resolve_source(src)
     if crs:
         grid_crs(crs, vertical)

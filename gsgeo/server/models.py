@@ -11,6 +11,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from gsgeo.limits import IFOV_MAX, IFOV_MIN, SIGMA_PX_MAX, SIGMA_PX_MIN
+
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 Vec2 = Annotated[list[Finite], Field(min_length=2, max_length=2)]
@@ -21,7 +23,7 @@ ItemId = Annotated[str, Field(min_length=1, max_length=100, pattern=r"^[^/\\\x00
 Slug = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")]
 CrsText = Annotated[str, Field(min_length=1, max_length=20000)]
 RayIndex = Annotated[int, Field(ge=0, le=999)]
-SigmaPx = Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]
+SigmaPx = Annotated[float, Field(ge=SIGMA_PX_MIN, le=SIGMA_PX_MAX, allow_inf_nan=False)]
 
 
 class Ray(BaseModel):
@@ -30,7 +32,7 @@ class Ray(BaseModel):
     model_config = ConfigDict(extra="ignore")
     origin: Vec3 = Field(description="camera centre, rendered ECEF, metres")
     direction: Vec3 = Field(description="ray direction, rendered ECEF, any non-zero length")
-    ifov: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] | None = Field(
+    ifov: Annotated[float, Field(ge=IFOV_MIN, le=IFOV_MAX, allow_inf_nan=False)] | None = Field(
         None, description="angular size of a pixel, radians")
     pixel: Vec2 | None = Field(None, description="clicked pixel (CSS px)")
     viewport: Vec2 | None = Field(None, description="canvas size (CSS px)")

@@ -1,6 +1,6 @@
 """Multi-ray spatial intersection: one point (`intersect`) or millions (`intersect_batch`).
 
-Two stochastic models (DESIGN.md, "Quality statistics"):
+Two stochastic models (README, "The solver"):
 
 Unweighted (``ifov=None``), the paper's
     Minimises sum d_i^2, d_i the perpendicular distance of the point to ray i.
@@ -20,11 +20,14 @@ Angular (``ifov`` given, radians per pixel)
     scatter exceeds sigma_px. This keeps the 95 % ellipsoid calibrated when sigma_px is right
     and never optimistic when it is not.
 
-Geometry checks: fewer than two rays, non-finite numbers or a zero direction raise
-:class:`~gsgeo.errors.InputError`; rays whose largest intersection angle is below
-``PARALLEL_LIMIT_DEG`` (0.1 degrees, where the depth error is 570 times the lateral one), or a
-point behind any camera (range <= 0), raise :class:`~gsgeo.errors.GeometryError`; a largest
-intersection angle below ``WEAK_GEOMETRY_DEG`` (2 degrees) is a warning.
+Input checks: fewer than two rays, non-finite numbers, an origin more than
+``gsgeo.limits.MAX_ORIGIN_M`` from the frame's origin, a direction that is zero or whose length
+is outside [DIRECTION_MIN, DIRECTION_MAX] (too small or too large to normalise), or sigma_px /
+ifov outside their ranges (gsgeo.limits) raise :class:`~gsgeo.errors.InputError`; rays whose
+largest intersection angle is below ``PARALLEL_LIMIT_DEG`` (0.1 degrees, where the depth
+error is 570 times the lateral one), or a point behind any camera (range <= 0), raise
+:class:`~gsgeo.errors.GeometryError`; a largest intersection angle below
+``WEAK_GEOMETRY_DEG`` (2 degrees) is a warning.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gsgeo import limits
 from gsgeo.errors import GeometryError, InputError
 from gsgeo.solve.core import solve_core, solve_one, unit_directions
 from gsgeo.solve.outliers import snoop
@@ -140,17 +144,41 @@ def _check_ifov(ifov, shape: tuple[int, ...]) -> np.ndarray | None:
         ) from None
     if not np.all(np.isfinite(f)) or np.any(f <= 0):
         raise InputError("ifov (radians per pixel) must be positive and finite for every ray")
+    if np.any(f < limits.IFOV_MIN) or np.any(f > limits.IFOV_MAX):
+        raise InputError(f"ifov must be between {limits.IFOV_MIN:g} and {limits.IFOV_MAX:g} "
+                         "radians per pixel for every ray")
     return f
 
 
 def _check_sigma_px(sigma_px) -> float:
     try:
         s = float(sigma_px)
-    except (TypeError, ValueError):
-        raise InputError(f"sigma_px must be a number of pixels, got {sigma_px!r}") from None
-    if not math.isfinite(s) or s <= 0:
-        raise InputError(f"sigma_px must be a positive number of pixels, got {sigma_px!r}")
-    return s
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"sigma_px must be a number of pixels, got {str(sigma_px)[:40]}") from None
+    return limits.sigma_px(s)
+
+
+def _check_ranges(o: np.ndarray, d: np.ndarray, norm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Masks (...) of rays whose origin is out of range and whose direction cannot be
+    normalised; o, d (..., 3) finite, ``norm`` their directions' plainly computed lengths.
+
+    Out of these ranges the squares in the normal equations overflow or underflow, and
+    would surface as a false "zero-length" or "behind the camera".
+    """
+    far = np.abs(o).max(axis=-1) > limits.MAX_ORIGIN_M / math.sqrt(3)
+    if far.any():  # the exact (scaled) length decides for the few candidates
+        far[far] = np.hypot.reduce(o[far], axis=-1) > limits.MAX_ORIGIN_M
+    bad_d = ~((norm >= limits.DIRECTION_MIN) & (norm <= limits.DIRECTION_MAX))
+    return far, bad_d
+
+
+def _direction_message(d: np.ndarray, bad: np.ndarray) -> str:
+    """The problem of the first bad direction (zero, too small or too large), naming the rays."""
+    zero = ~np.any(d != 0, axis=-1)
+    if zero.any():
+        return f"ray(s) {_list(zero)} have a zero-length direction"
+    first = d[np.flatnonzero(bad)[0]]
+    return f"ray(s) {_list(bad)} have a direction {limits.direction_problem(first)}"
 
 
 def intersection_angles(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -226,9 +254,13 @@ def intersect(
     if bad.any():
         raise InputError(f"ray(s) {_list(bad)} contain NaN or infinite numbers")
     du, norm = unit_directions(d)
-    zero = ~(norm > 0) | ~np.all(np.isfinite(du), axis=1)
-    if zero.any():
-        raise InputError(f"ray(s) {_list(zero)} have a zero-length direction")
+    far, bad_d = _check_ranges(o, d, norm)
+    if far.any():
+        r = float(np.hypot.reduce(o[np.flatnonzero(far)[0]]))
+        raise InputError(f"ray(s) {_list(far)}: origin out of range, {r:.3g} m from the frame's "
+                         f"origin (more than {limits.MAX_ORIGIN_M:g} m)")
+    if bad_d.any():
+        raise InputError(_direction_message(d, bad_d))
     f = _check_ifov(ifov, (n,))
     s_px = _check_sigma_px(sigma_px)
 
@@ -374,9 +406,17 @@ def intersect_batch(
             first = start + int(np.flatnonzero(~(np.isfinite(oc) & np.isfinite(dc)).all(axis=(1, 2)))[0])
             raise InputError(f"point {first} has rays with NaN or infinite numbers")
         du, norm = unit_directions(dc)
-        if not np.all(norm > 0):
-            first = start + int(np.flatnonzero(~(norm > 0).all(axis=1))[0])
-            raise InputError(f"point {first} has a ray with a zero-length direction")
+        far, bad_d = _check_ranges(oc, dc, norm)
+        if far.any():
+            first = start + int(np.flatnonzero(far.any(axis=1))[0])
+            raise InputError(f"point {first} has a ray whose origin is out of range (more than "
+                             f"{limits.MAX_ORIGIN_M:g} m from the frame's origin)")
+        if bad_d.any():
+            k = int(np.flatnonzero(bad_d.any(axis=1))[0])
+            first = dc[k][bad_d[k]][0]
+            why = ("with a zero-length direction" if not np.any(first != 0) else
+                   f"with a direction {limits.direction_problem(first)}")
+            raise InputError(f"point {start + k} has a ray {why}")
         fc = None if f is None else f[sl]
         sol = solve_core(oc, du, fc, s_px)
         ok = (_min_abs_cos(du) <= _COS_PARALLEL) & np.all(sol.ranges > 0, axis=1)

@@ -35,7 +35,7 @@ from gsgeo.store.solving import (
     session_point,
     solved_fields,
 )
-from gsgeo.store.validate import item_id, positive, slug
+from gsgeo.store.validate import item_id, sigma_px, slug
 
 SETTINGS = ("crs", "vertical", "geoid", "source_crs", "sigma_px")
 KINDS = {"line": 2, "polygon": 3}  # kind -> minimum number of points
@@ -67,7 +67,7 @@ def validate_settings(settings: dict[str, Any], data_dir: Path | None) -> dict[s
     if not isinstance(src, str):
         raise InputError("source_crs: expected text such as EPSG:4978")
     out["source_crs"] = src.strip()
-    out["sigma_px"] = positive(out.get("sigma_px", 1.0), "sigma_px")
+    out["sigma_px"] = sigma_px(out.get("sigma_px", 1.0))
     try:
         source_crs(out["source_crs"])
     except CRSError as exc:
@@ -392,10 +392,12 @@ class Projects:
         if not isinstance(ids, list):
             raise InputError("points: expected a list of point ids")
         out = [item_id(v, f"points[{i}]") for i, v in enumerate(ids)]
-        if kind == "polygon" and len(out) > 1 and out[0] == out[-1]:
+        closed = kind == "polygon" and len(out) > 1 and out[0] == out[-1]
+        if closed:
             out = out[:-1]  # closing vertex given explicitly
         if len(out) < KINDS[kind]:
-            raise InputError(f"points: a {kind} needs at least {KINDS[kind]} points, got {len(out)}")
+            raise InputError(f"points: a {kind} needs at least {KINDS[kind]} points, got {len(out)}"
+                             + (f" ({len(ids)} given, the last closing the ring)" if closed else ""))
         if len(out) > MAX_FEATURE_POINTS:
             raise InputError(f"points: more than {MAX_FEATURE_POINTS} points")
         for i in range(1, len(out)):

@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
-import math
 import re
 from typing import Any
 
+from gsgeo import limits
 from gsgeo.errors import InputError
 
 #: Project and scene ids: safe in URLs and file names.
 SLUG = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
-#: Point, line, polygon and check point ids: any printable text without '/' or '\'.
+#: Point, line, polygon and check point ids: any printable text without '/' or '\'
+#: (control characters are refused by gsgeo.limits.id_text, before stripping).
 MAX_ID_LEN = 100
-_BAD_ID_CHARS = re.compile(r"[/\\\x00-\x1f\x7f]")
+_BAD_ID_CHARS = re.compile(r"[/\\]")
 
 
 def slug(value: Any, where: str) -> str:
@@ -23,21 +24,17 @@ def slug(value: Any, where: str) -> str:
 
 
 def item_id(value: Any, where: str) -> str:
-    if isinstance(value, bool) or not isinstance(value, (str, int)):
-        raise InputError(f"{where}: expected text")
-    v = str(value).strip()
-    if not v:
-        raise InputError(f"{where}: must not be empty")
+    """A point, line, polygon or check point id, stripped of surrounding blanks; InputError
+    for a control character (checked before stripping), '/', '\\', '.', '..', or more than
+    MAX_ID_LEN characters."""
+    v = limits.id_text(value, where).strip()
     if len(v) > MAX_ID_LEN:
         raise InputError(f"{where}: longer than {MAX_ID_LEN} characters")
     if _BAD_ID_CHARS.search(v) or v in (".", ".."):
-        raise InputError(f"{where}: must not contain '/', '\\' or control characters")
+        raise InputError(f"{where}: must not contain '/' or '\\' nor be '.' or '..'")
     return v
 
 
-def positive(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise InputError(f"{where}: expected a finite number")
-    if value <= 0:
-        raise InputError(f"{where}: must be positive")
-    return float(value)
+def sigma_px(value: Any, where: str = "sigma_px") -> float:
+    """The aiming precision in pixels within gsgeo.limits' range (SIGMA_PX_MIN..SIGMA_PX_MAX)."""
+    return limits.sigma_px(value, where)

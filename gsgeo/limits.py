@@ -1,0 +1,110 @@
+"""Ranges and id rules every input edge shares: the session JSON, the command line, the store
+and the HTTP API check them with the same numbers (the API models import these constants).
+
+Imports nothing of gsgeo but its errors, so every layer can use it.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+from gsgeo.errors import InputError
+
+#: A-priori aiming precision, pixels: from a hundredth of a pixel (finer than any aim) to 100.
+SIGMA_PX_MIN = 0.01
+SIGMA_PX_MAX = 100.0
+#: Angular size of a pixel, radians per pixel: from 1e-7 (a telescope) to 0.1 (5.7 degrees).
+IFOV_MIN = 1e-7
+IFOV_MAX = 0.1
+#: Largest distance of a ray origin (camera centre) from the Earth's centre, metres (rendered
+#: or georeferenced ECEF); 150 times the Earth's radius, beyond the Moon.
+MAX_ORIGIN_M = 1e9
+#: Direction vectors must have a length in this range, so that every layer (numpy, PROJ, the
+#: viewer's JavaScript) can normalise them without overflow or underflow; a unit vector is usual.
+DIRECTION_MIN = 1e-100
+DIRECTION_MAX = 1e100
+
+#: Control characters (Unicode Cc: C0, DEL and C1 such as U+0085), line and paragraph
+#: separators, and unpaired surrogates: never part of an id. str.strip() would silently
+#: remove some of them (U+0085, U+2028), so they are refused before any stripping.
+_BAD_ID_CHAR = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
+
+
+def _finite(value: Any, where: str, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{where}: expected a number of {unit}")
+    try:
+        v = float(value)
+    except OverflowError:
+        raise InputError(f"{where}: expected a finite number of {unit}, got an integer too "
+                         "large for a float") from None
+    if not math.isfinite(v):
+        raise InputError(f"{where}: expected a finite number of {unit}")
+    return v
+
+
+def sigma_px(value: Any, where: str = "sigma_px") -> float:
+    """The aiming precision in pixels, checked to lie in [SIGMA_PX_MIN, SIGMA_PX_MAX]."""
+    v = _finite(value, where, "pixels")
+    if not SIGMA_PX_MIN <= v <= SIGMA_PX_MAX:
+        raise InputError(f"{where}: must be between {SIGMA_PX_MIN:g} and {SIGMA_PX_MAX:g} pixels, "
+                         f"got {v:g}")
+    return v
+
+
+def ifov(value: Any, where: str = "ifov") -> float:
+    """The angular size of a pixel in radians, checked to lie in [IFOV_MIN, IFOV_MAX]."""
+    v = _finite(value, where, "radians per pixel")
+    if not IFOV_MIN <= v <= IFOV_MAX:
+        raise InputError(f"{where}: must be between {IFOV_MIN:g} and {IFOV_MAX:g} radians per "
+                         f"pixel, got {v:g}")
+    return v
+
+
+def vector_length(v: Any) -> float:
+    """Euclidean length of a vector of floats without overflow or underflow (math.hypot scales)."""
+    return math.hypot(*(float(x) for x in v))
+
+
+def origin_problem(origin: Any) -> str | None:
+    """Why a camera centre (ECEF, metres) is unusable, or None: beyond MAX_ORIGIN_M."""
+    r = vector_length(origin)
+    if not r <= MAX_ORIGIN_M:
+        return (f"out of range: {r:.3g} m from the Earth's centre (more than "
+                f"{MAX_ORIGIN_M:g} m)")
+    return None
+
+
+def direction_problem(direction: Any) -> str | None:
+    """Why a direction vector is unusable, or None: zero, or too small or large to normalise."""
+    r = vector_length(direction)
+    if r == 0:
+        return "is a zero vector"
+    if r < DIRECTION_MIN:
+        return (f"too small to normalise (length {r:.3g}; give a length between "
+                f"{DIRECTION_MIN:g} and {DIRECTION_MAX:g}, e.g. a unit vector)")
+    if not r <= DIRECTION_MAX:
+        return (f"too large to normalise (length {r:.3g}; give a length between "
+                f"{DIRECTION_MIN:g} and {DIRECTION_MAX:g}, e.g. a unit vector)")
+    return None
+
+
+def id_text(value: Any, where: str) -> str:
+    """An id (point, line, polygon, check point) as given, or InputError.
+
+    Text or an integer; never empty or blank, never holding a control character, a line or
+    paragraph separator or an unpaired surrogate (checked before any stripping).
+    """
+    if isinstance(value, bool) or not isinstance(value, (str, int)):
+        raise InputError(f"{where}: expected text")
+    v = str(value)
+    bad = _BAD_ID_CHAR.search(v)
+    if bad:
+        raise InputError(f"{where}: contains U+{ord(bad.group()):04X} at position {bad.start() + 1} "
+                         "(a control character, line or paragraph separator or unpaired "
+                         "surrogate); ids must be printable text")
+    if not v.strip():
+        raise InputError(f"{where}: must not be empty")
+    return v
