@@ -1,4 +1,18 @@
-"""The `gsgeo` command. Each subcommand lives in its own module under gsgeo.commands."""
+"""The `gsgeo` command. Each subcommand lives in its own module under gsgeo.commands.
+
+Errors. Every command answers bad input with one line ``gsgeo COMMAND: error: MESSAGE`` on
+stderr and exit code 2, never a traceback. The commands check what they can name precisely
+(a session's JSON path, a CRS, an output file) and raise GsgeoError; as a guard behind those
+checks, `main` also turns
+
+- OSError into the path and the system's reason (``/x/out: Permission denied``),
+- RecursionError, MemoryError and ValueError into their message,
+
+with exit code 2 as well. Anything else is a bug of gsgeo: one line ``gsgeo COMMAND: internal
+error: TYPE: MESSAGE`` with a hint and exit code 1. Set the environment variable
+``GSGEO_DEBUG=1`` to get the full Python traceback of any error instead (developers).
+Ctrl-C exits with 130; a closed output pipe (``gsgeo solve ... | head``) with 0.
+"""
 
 from __future__ import annotations
 
@@ -20,6 +34,7 @@ COMMANDS = {
 }
 
 EXIT_USAGE = 2
+EXIT_INTERNAL = 1
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
@@ -38,14 +53,33 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def os_error_text(exc: OSError) -> str:
+    """``PATH: reason`` of an OSError (both paths of a rename), or its text without a path."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    if exc.filename is None:
+        return reason
+    paths = os.fsdecode(exc.filename)
+    if exc.filename2 is not None:
+        paths += f" -> {os.fsdecode(exc.filename2)}"
+    return f"{paths}: {reason}"
+
+
+def _debug() -> bool:
+    return os.environ.get("GSGEO_DEBUG", "") not in ("", "0")
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one `gsgeo` command; returns the exit code (errors: see the module docstring)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None)
     args = parser.parse_args(argv)
+    prefix = f"gsgeo {args.command}:"
     try:
         return int(args.run(args) or 0)
     except GsgeoError as exc:
-        print(f"gsgeo {args.command}: error: {exc}", file=sys.stderr)
+        if _debug():
+            raise
+        print(f"{prefix} error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("gsgeo: interrupted", file=sys.stderr)
@@ -55,6 +89,32 @@ def main(argv: list[str] | None = None) -> int:
         # Point stdout at devnull so the interpreter's final flush does not complain.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except (OSError, RecursionError, MemoryError, ValueError) as exc:
+        if _debug():
+            raise
+        if isinstance(exc, OSError):
+            text = os_error_text(exc)
+        elif isinstance(exc, RecursionError):
+            text = "the input is nested too deeply to process"
+        elif isinstance(exc, MemoryError):
+            text = "out of memory: the input is too large"
+        else:
+            text = str(exc) or type(exc).__name__
+        print(f"{prefix} error: {_one_line(text)}", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as exc:
+        if _debug():
+            raise
+        print(f"{prefix} internal error: {type(exc).__name__}: {_one_line(str(exc))} "
+              "(a bug in gsgeo; run again with GSGEO_DEBUG=1 for the traceback and report it)",
+              file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+def _one_line(text: str, limit: int = 500) -> str:
+    """The message on one line, at most ``limit`` characters."""
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else flat[:limit - 3] + "..."
 
 
 if __name__ == "__main__":

@@ -92,7 +92,8 @@ def test_crs_search_and_info(capsys):
     assert capsys.readouterr().out.splitlines()[1].startswith("EPSG:27700")
     assert main(["crs", "search", "utm", "32N", "--json"]) == 0
     assert "EPSG:25832" in [r["code"] for r in json.loads(capsys.readouterr().out)]
-    assert main(["crs", "search", "no such crs name xyz"]) == 1
+    assert main(["crs", "search", "no such crs name xyz"]) == 0  # no match: an answer, not an error
+    assert "CRS matches 'no such crs name xyz'" in capsys.readouterr().err
     assert main(["crs", "info", "EPSG:27700"]) == 0
     out = capsys.readouterr().out
     for words in ("metre", "Airy 1830", "Transverse Mercator", "area of use",

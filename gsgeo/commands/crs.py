@@ -42,13 +42,14 @@ def run_search(args: argparse.Namespace) -> int:
     kinds = tuple(args.kind or ("projected", "compound"))
     rows = search_crs(text, kinds, include_deprecated=args.all,
                       authority=None if args.all else "EPSG")
+    if not rows:  # a search that finds nothing is an answer, not an error: exit 0
+        print(f"no {' or '.join(kinds)} CRS matches '{text}'", file=sys.stderr)
     if args.json:
         json.dump([r.__dict__ for r in rows[:args.limit]], sys.stdout, indent=2)
         sys.stdout.write("\n")
-        return 0 if rows else 1
+        return 0
     if not rows:
-        print(f"no {' or '.join(kinds)} CRS matches '{text}'", file=sys.stderr)
-        return 1
+        return 0
     print(f"{'code':<16} {'kind':<10} {'name':<48} area of use")
     for r in rows[:args.limit]:
         dep = " (deprecated)" if r.deprecated else ""

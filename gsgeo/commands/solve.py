@@ -9,12 +9,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+from pathlib import Path
 
+from gsgeo import limits
 from gsgeo.crs.pipeline import MeasurementFailure, measure_session
 from gsgeo.errors import GsgeoError, InputError
+from gsgeo.export.atomic import check_target
 from gsgeo.export.writer import FORMATS as EXPORT_FORMATS
-from gsgeo.export.writer import write_session_results
+from gsgeo.export.writer import format_for, write_session_results
 from gsgeo.session import Session, load_session, ray_arrays
 from gsgeo.solve import SCALE_95_1D, intersect
 
@@ -25,7 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="intersect the rays of a session JSON file",
         description="Intersect the rays of every point in a session JSON file by least squares.",
     )
-    p.add_argument("session", help="session JSON file (DESIGN.md, 'Session JSON')")
+    p.add_argument("session", help="session JSON file (README, 'Session JSON')")
     p.add_argument("--crs", default=None,
                    help="projected grid CRS for the output, e.g. EPSG:27700 (overrides the "
                         "session's crs); a compound CRS such as EPSG:27700+5701 brings its heights")
@@ -39,7 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="geocentric CRS the scene is georeferenced in (default the session's, "
                         "EPSG:4978 WGS 84; e.g. EPSG:4936 ETRS89 for a pure conversion)")
     p.add_argument("--sigma-px", type=float, default=None,
-                   help="a-priori aiming precision in pixels (overrides the session's sigma_px)")
+                   help="a-priori aiming precision in pixels, "
+                        f"{limits.SIGMA_PX_MIN:g} to {limits.SIGMA_PX_MAX:g} "
+                        "(overrides the session's sigma_px)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("-o", "--output", default=None, metavar="OUT.gpkg|OUT.geojson|OUT.csv",
                    help="also export points, rays, lines and polygons (format from the suffix; "
@@ -130,21 +136,33 @@ def _grid_table(results: list) -> tuple[str, list[str]]:
     return "\n".join(lines), warnings
 
 
+def check_output(path: str, fmt: str | None) -> Path:
+    """The export target, checked before anything is solved: a known format (suffix or
+    --export-format), an existing writable directory, and not a directory itself."""
+    format_for(path, fmt)
+    target = check_target(path)
+    parent = target.parent if str(target.parent) else Path(".")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"cannot write {target}: the directory {parent} is not writable")
+    return target
+
+
 def run(args: argparse.Namespace) -> int:
+    sigma_px = None if args.sigma_px is None else limits.sigma_px(args.sigma_px, "--sigma-px")
     session = load_session(args.session)
-    if args.sigma_px is not None:
-        if not args.sigma_px > 0:
-            raise InputError("--sigma-px must be a positive number of pixels")
-        session.sigma_px = args.sigma_px
+    if sigma_px is not None:
+        session.sigma_px = sigma_px
     if not session.points:
         raise InputError(f"{args.session}: the session has no points")
     crs = getattr(args, "crs", None) or session.crs
+    if getattr(args, "output", None):
+        if not crs:
+            raise InputError("-o/--output needs a grid CRS: give --crs (e.g. EPSG:27700)")
+        check_output(args.output, getattr(args, "export_format", None))
     if crs:
         return _run_grid(args, session, crs)
     if getattr(args, "vertical", None) or getattr(args, "geoid", None):
         raise InputError("--vertical / --geoid need a grid CRS: give --crs (e.g. EPSG:27700)")
-    if getattr(args, "output", None):
-        raise InputError("-o/--output needs a grid CRS: give --crs (e.g. EPSG:27700)")
     results = solve_session(session)
     if args.json:
         json.dump({"points": results}, sys.stdout, indent=2)
