@@ -211,6 +211,7 @@ def polygon_measures(xyz, cov=None, ids: Sequence[str] | None = None, *, unit_m:
     """
     p, c = _check(xyz, cov, ids, "polygon")
     ids = list(ids) if ids is not None else None
+    given = p.shape[0]  # the count the caller gave, before dropping a closing point
     if p.shape[0] >= 2 and np.all(p[-1, :2] == p[0, :2]):
         p = p[:-1]
         c = None if c is None else c[:-1]
@@ -223,7 +224,7 @@ def polygon_measures(xyz, cov=None, ids: Sequence[str] | None = None, *, unit_m:
     if n < 3 or distinct < 3:
         raise GeometryError(
             f"a polygon needs at least 3 distinct points, got {distinct}"
-            + (f" (of {n} given)" if n != distinct else ""))
+            + (f" (of {given} given)" if given != distinct else ""))
     if distinct < n:
         k = int(np.flatnonzero(repeat)[0])
         raise GeometryError(f"the polygon visits {_name(ids, k)} (or its position) more than once")

@@ -23,7 +23,7 @@ import numpy as np
 
 from gsgeo.crs.pipeline import RECORD_KEYS
 from gsgeo.crs.resolve import grid_crs, parse_crs
-from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.errors import CRSError, GeometryError, GsgeoError, InputError
 from gsgeo.export.features import (
     line_measures,
     line_measures_many,
@@ -455,11 +455,16 @@ def _parse_features(items: Iterable[Any], kind: str, index, failed) -> tuple[lis
                 raise InputError(f"duplicate {kind} id '{fid}'")
             seen.add(fid)
             if kind == "polygon":
+                given = len(pids)
                 if len(pids) > 1 and pids[-1] == pids[0]:
                     pids = pids[:-1]  # closed explicitly; polygons close themselves
                 dup = next((p for j, p in enumerate(pids) if p in pids[:j]), None)
                 if dup is not None:
                     raise InputError(f"polygon '{fid}': point '{dup}' appears more than once")
+                if len(pids) < 3:  # counted here, where the ids the user gave are known
+                    of = f" (of {given} given)" if given > len(pids) else ""
+                    raise GeometryError(f"polygon '{fid}': a polygon needs at least 3 distinct "
+                                        f"points, got {len(pids)}{of}")
             rows.append((fid, pids, _resolve(kind, fid, pids, index, failed)))
     except GsgeoError as exc:
         return rows, exc
