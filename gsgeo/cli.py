@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
 
 from gsgeo import __version__
@@ -79,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     except GsgeoError as exc:
         if _debug():
             raise
-        print(f"{prefix} error: {exc}", file=sys.stderr)
+        print(f"{prefix} error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("gsgeo: interrupted", file=sys.stderr)
@@ -100,20 +101,28 @@ def main(argv: list[str] | None = None) -> int:
             text = "out of memory: the input is too large"
         else:
             text = str(exc) or type(exc).__name__
-        print(f"{prefix} error: {_one_line(text)}", file=sys.stderr)
+        print(f"{prefix} error: {one_line(text)}", file=sys.stderr)
         return EXIT_USAGE
     except Exception as exc:
         if _debug():
             raise
-        print(f"{prefix} internal error: {type(exc).__name__}: {_one_line(str(exc))} "
+        print(f"{prefix} internal error: {type(exc).__name__}: {one_line(str(exc))} "
               "(a bug in gsgeo; run again with GSGEO_DEBUG=1 for the traceback and report it)",
               file=sys.stderr)
         return EXIT_INTERNAL
 
 
-def _one_line(text: str, limit: int = 500) -> str:
-    """The message on one line, at most ``limit`` characters."""
-    flat = " ".join(text.split())
+#: Characters that would break a message's line or hide in it: control characters (C0, C1),
+#: line and paragraph separators, unpaired surrogates. Shown escaped (\x85), never dropped.
+_UNPRINTABLE = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
+
+
+def one_line(text: str, limit: int = 2000) -> str:
+    """A message as one printable line of at most ``limit`` characters: line breaks and tabs
+    become spaces, other control characters their escapes (user text echoed in a message,
+    e.g. an unknown CRS, must not split the line or vanish from it)."""
+    flat = re.sub(r"[\r\n\t]+", " ", text)
+    flat = _UNPRINTABLE.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), flat)
     return flat if len(flat) <= limit else flat[:limit - 3] + "..."
 
 
