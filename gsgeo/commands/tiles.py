@@ -126,6 +126,8 @@ def _run(args: argparse.Namespace) -> int:
     # Before numpy loads: its OpenBLAS would otherwise start a spinning thread per CPU in
     # every worker process for matrices of a few elements (the work is split by processes).
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    import numpy as np
+
     from gsgeo.tiles.build import build_tileset
     from gsgeo.tiles.workers import keep_freed_memory
 
@@ -141,10 +143,14 @@ def _run(args: argparse.Namespace) -> int:
             print(f"gsgeo tiles: warning: {w}", file=sys.stderr)
         georef.warnings.clear()
 
-    summary = build_tileset(args.input, args.output, georef, max_splats=args.max_splats,
-                            spz_version=args.spz_version, level=args.level,
-                            workers=args.workers, overwrite=args.overwrite,
-                            progress=None if args.quiet else sys.stderr, on_start=started)
+    # Values out of range are dropped (NaN/inf) or refused with a message by the build;
+    # numpy's floating-point warnings about them would only add noise to that one message
+    # (the workers fork inside, so they inherit the setting).
+    with np.errstate(all="ignore"):
+        summary = build_tileset(args.input, args.output, georef, max_splats=args.max_splats,
+                                spz_version=args.spz_version, level=args.level,
+                                workers=args.workers, overwrite=args.overwrite,
+                                progress=None if args.quiet else sys.stderr, on_start=started)
     for w in summary.warnings:
         print(f"gsgeo tiles: warning: {w}", file=sys.stderr)
     if args.json:

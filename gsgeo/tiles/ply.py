@@ -84,6 +84,10 @@ def _compressed_layout(path, fmt, elements, header_end) -> CompressedLayout:
         [n for n in _PACKED if n not in vdt.names]
     if missing:
         raise InputError(f"{path}: compressed PLY lacks {', '.join(missing)}")
+    colour = [f"{m}_{c}" for c in "rgb" for m in ("min", "max")]
+    if any(n in cdt.names for n in colour) and not all(n in cdt.names for n in colour):
+        raise InputError(f"{path}: compressed PLY chunks have some colour ranges but not all "
+                         f"of {', '.join(colour)}")
     not_u32 = [n for n in _PACKED if vdt[n] != np.dtype("<u4")]
     if not_u32:
         raise InputError(f"{path}: compressed PLY properties {', '.join(not_u32)} must be "
