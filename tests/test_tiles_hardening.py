@@ -182,6 +182,15 @@ MALFORMED = {
                                b"property float packed_rotation\nproperty float packed_scale\n"
                                b"property float packed_color\nend_header\n" + b"\0" * 64,
                                "must be uint"),
+    "compressed partial colour": (b"ply\nformat binary_little_endian 1.0\nelement chunk 1\n"
+                                  + b"".join(f"property float {p}\n".encode() for p in (
+                                      "min_x min_y min_z max_x max_y max_z min_scale_x "
+                                      "min_scale_y min_scale_z max_scale_x max_scale_y "
+                                      "max_scale_z min_r max_r").split())
+                                  + b"element vertex 1\nproperty uint packed_position\n"
+                                  b"property uint packed_rotation\nproperty uint packed_scale\n"
+                                  b"property uint packed_color\nend_header\n" + b"\0" * 72,
+                                  "colour ranges"),
 }
 
 
@@ -391,38 +400,106 @@ def test_outdir_exists_at_every_instant_of_an_overwrite(tmp_path, ply, monkeypat
 # --- fuzz (defect 4) ------------------------------------------------------------------------
 
 TYPES = ["float", "double", "uchar", "int", "short", "float32", "uint", "float128", "list"]
-COUNTS = st.one_of(st.integers(-3, 12).map(str),
-                   st.sampled_from(["", "1e3", "9" * 25, "0x10", "٣", "2 3"]))
+NP_TYPES = {"float": "<f4", "double": "<f8", "uchar": "<u1", "int": "<i4", "short": "<i2",
+            "float32": "<f4", "uint": "<u4"}
+VALUES = [0.5, -1.25, 3.0, 0.1, -4.0, 1e3, 0.0] * 6 + [float("nan"), float("inf"), 1e39, -1e300]
+BAD_COUNTS = ["-3", "", "1e3", "9" * 25, "0x10", "٣", "2 3"]
+FORMATS = ["ascii 1.0", "binary_little_endian 1.0", "binary_big_endian 1.0"]
+WORDS = ["0", "1.5", "-2", "0.25", "3e2", "-0", "nan", "inf", "1e400", "9" * 30]
 
 
 @st.composite
 def ply_files(draw) -> bytes:
-    fmt = draw(st.sampled_from(["ascii", "binary_little_endian", "binary_big_endian",
-                                "binary_middle_endian", "ascii 1.0 extra", ""]))
-    count = draw(COUNTS)
-    props = draw(st.lists(st.sampled_from(PROPS + ["nx", "f_rest_0", "red", "é", "x"]),
-                          min_size=0, max_size=16))
-    if draw(st.booleans()):
-        props = PROPS + props[:2]
-    types = draw(st.lists(st.sampled_from(TYPES), min_size=len(props), max_size=len(props)))
+    """INRIA-style PLY files: a valid file or one with one fault (format, count, properties,
+    types, end of header, row arity, body size, odd words or bytes); values include NaN,
+    inf and numbers beyond float32."""
+    fault = draw(st.sampled_from([None] * 4 + ["format", "count", "props", "types", "end",
+                                               "arity", "size", "words"]))
+    fmt = draw(st.sampled_from(FORMATS))
+    if fault == "format":
+        fmt = draw(st.sampled_from(["binary_middle_endian 1.0", "ascii", "ascii 1.0 x", ""]))
+    n = draw(st.integers(0 if fault == "count" else 1, 12))
+    count = draw(st.sampled_from(BAD_COUNTS)) if fault == "count" and n == 0 else str(n)
+    props = PROPS + draw(st.lists(st.sampled_from(["nx", "ny", "red"]), max_size=2,
+                                  unique=True))
+    if fault == "props":
+        props = draw(st.lists(st.sampled_from(PROPS + ["red", "green", "blue", "x", "é"]),
+                              max_size=16))
+    types = [draw(st.sampled_from(TYPES if fault == "types" else
+                                  ["float"] * 6 + ["double", "uchar", "short"]))
+             for _ in props]
     lines = ["ply", f"format {fmt}", f"element vertex {count}"]
     for p, t in zip(props, types, strict=True):
         lines.append(f"property list uchar float {p}" if t == "list" else f"property {t} {p}")
-    if draw(st.booleans()):
+    if fault != "end":
         lines.append("end_header")
     head = ("\n".join(lines) + "\n").encode("utf-8")
     if fmt.startswith("ascii"):
-        rows = draw(st.lists(st.lists(st.sampled_from(["0", "1.5", "-2", "nan", "inf", "1e400",
-                                                       "9" * 30, "x", "é", ""]),
-                                      max_size=18).map(" ".join), max_size=12))
+        words = st.sampled_from(WORDS + (["x", "é", "\x00", ""] if fault == "words" else []))
+        arity = st.integers(len(props) - 2, len(props) + 1) if fault == "arity" else \
+            st.just(len(props))
+        rows = [" ".join(draw(words) for _ in range(draw(arity))) for _ in range(n)]
         body = ("\n".join(rows) + "\n").encode("utf-8")
     else:
-        body = draw(st.binary(max_size=800))
+        dt = np.dtype([(f"p{i}", NP_TYPES.get(t, "f4")) for i, t in enumerate(types)])
+        if fmt.startswith("binary_big"):
+            dt = dt.newbyteorder(">")
+        rec = np.zeros(n, dt)
+        with np.errstate(all="ignore"):
+            for name in dt.names:
+                vals = np.array(draw(st.lists(st.sampled_from(VALUES), min_size=n,
+                                              max_size=n)), np.float64)
+                rec[name] = vals.astype(dt[name])    # wraps or saturates for integers
+        body = rec.tobytes()
+    if fault == "size":
+        body = body[:draw(st.integers(0, len(body)))] + draw(st.binary(max_size=8))
     return head + body
 
 
-@settings(max_examples=120, deadline=None, suppress_health_check=list(HealthCheck))
-@given(data=ply_files())
+CHUNK = ("min_x min_y min_z max_x max_y max_z min_scale_x min_scale_y min_scale_z max_scale_x "
+         "max_scale_y max_scale_z").split()
+COLOUR = ["min_r", "min_g", "min_b", "max_r", "max_g", "max_b"]
+PACKED = ["packed_position", "packed_rotation", "packed_scale", "packed_color"]
+
+
+@st.composite
+def compressed_ply_files(draw) -> bytes:
+    """PlayCanvas/SuperSplat compressed PLY files: valid or with one fault, random packs."""
+    fault = draw(st.sampled_from([None] * 4 + ["format", "chunk", "packed", "sh", "size",
+                                               "chunks"]))
+    count = draw(st.integers(1, 700))
+    chunks = (count + 255) // 256 - (fault == "chunks")
+    fmt = "ascii" if fault == "format" else "binary_little_endian"
+    chunk_props = CHUNK + (COLOUR if draw(st.booleans()) else [])
+    if fault == "chunk":
+        chunk_props = draw(st.lists(st.sampled_from(CHUNK + COLOUR), max_size=14, unique=True))
+    packed = [(p, "float" if fault == "packed" and i == 0 else "uint")
+              for i, p in enumerate(draw(st.permutations(PACKED)))]
+    lines = ["ply", f"format {fmt} 1.0", f"element chunk {chunks}"]
+    lines += [f"property float {p}" for p in chunk_props]
+    lines.append(f"element vertex {count}")
+    lines += [f"property {t} {p}" for p, t in packed]
+    n_sh = 0
+    if fault == "sh" or draw(st.booleans()):
+        n_sh = draw(st.sampled_from([9, 24, 45, 10] if fault == "sh" else [9, 24, 45]))
+        bad_name = fault == "sh" and draw(st.booleans())
+        lines.append(f"element sh {count + (fault == 'sh' and not bad_name)}")
+        lines += [f"property uchar f_rest_{i + 100 * (bad_name and i == 3)}"
+                  for i in range(n_sh)]
+    lines.append("end_header")
+    head = ("\n".join(lines) + "\n").encode()
+    with np.errstate(all="ignore"):
+        bounds = np.array(draw(st.lists(st.sampled_from(VALUES), min_size=len(chunk_props),
+                                        max_size=len(chunk_props))), np.float32)
+    seed = draw(st.integers(0, 2**32 - 1))
+    rand = np.random.default_rng(seed).integers(0, 256, count * (16 + n_sh), np.uint8)
+    body = np.tile(bounds, max(chunks, 0)).tobytes() + rand.tobytes()
+    cut = draw(st.integers(0, len(body))) if fault == "size" else len(body)
+    return head + body[:cut]
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+@given(data=st.one_of(ply_files(), compressed_ply_files()))
 def test_fuzzed_ply_never_tracebacks(tmp_path_factory, capsys, data):
     d = tmp_path_factory.mktemp("fuzz")
     (d / "f.ply").write_bytes(data)
