@@ -384,3 +384,11 @@ def test_good_output_still_written(tmp_path, capsys):
     code, out, err = solve(capsys, write(tmp_path, doc), "-o", tmp_path / "o.csv")
     assert code == 0 and "P1" in out
     assert (tmp_path / "o.csv").read_text().startswith("point_id,")
+
+
+def test_missing_geoid_is_one_message_before_solving(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("gsgeo.commands.solve.measure_session", None)  # would fail if called
+    for geoid, words in ((tmp_path / "none.tif", "no such file"), (tmp_path, "is a directory")):
+        code, stdout, err = solve(capsys, EXAMPLE, "--crs", "EPSG:27700", "--geoid", geoid)
+        assert code == 2 and stdout == ""
+        one_error(err, f"--geoid {geoid}: {words}")

@@ -155,6 +155,10 @@ def run(args: argparse.Namespace) -> int:
     if not session.points:
         raise InputError(f"{args.session}: the session has no points")
     crs = getattr(args, "crs", None) or session.crs
+    geoid = getattr(args, "geoid", None)
+    if geoid and not Path(geoid).is_file():  # once, before solving, not once per point
+        raise InputError(f"--geoid {geoid}: "
+                         + ("is a directory" if Path(geoid).is_dir() else "no such file"))
     if getattr(args, "output", None):
         if not crs:
             raise InputError("-o/--output needs a grid CRS: give --crs (e.g. EPSG:27700)")
