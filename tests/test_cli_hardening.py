@@ -192,7 +192,7 @@ def test_store_settings_use_the_same_range(tmp_path):
         store.close()
 
 
-def test_api_models_use_the_same_range(tmp_path):
+def test_api_uses_the_same_range_and_id_rule(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         from fastapi.testclient import TestClient
@@ -209,6 +209,12 @@ def test_api_models_use_the_same_range(tmp_path):
             assert field in r.json()["message"]
         r = client.post("/api/intersect", json={"rays": london_rays(3, ifov=1e-3), "sigma_px": 100})
         assert r.status_code == 200, r.text
+        # ids with control characters: a 4xx naming the character, nothing stored
+        pid = client.post("/api/projects", json={"name": "A", "crs": "EPSG:32630"}).json()["id"]
+        for bad in ("\x85nel", "nel\u2028"):
+            r = client.post(f"/api/projects/{pid}/points", json={"id": bad, "rays": london_rays(3)})
+            assert r.status_code == 422 and "U+" in r.json()["message"], r.text
+        assert client.get(f"/api/projects/{pid}/points").json()["points"] == []
 
 
 # 3. the real problem of huge or tiny numbers -------------------------------------------------

@@ -172,7 +172,7 @@ class Projects:
             if any(k in changes for k in SETTINGS):
                 new = p.settings() | {k: changes[k] for k in SETTINGS if k in changes}
                 if new.get("sigma_px") is None:
-                    raise InputError("sigma_px: must be a positive number, not null")
+                    raise InputError("sigma_px: must be a number of pixels, not null")
                 new = validate_settings(new, self.data_dir)
                 if new != p.settings():
                     for k in SETTINGS:
