@@ -19,6 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gsgeo.cli import main
+from gsgeo.errors import InputError
 from gsgeo.tiles import swap
 from gsgeo.tiles.build import build_tileset
 from gsgeo.tiles.georef import Georeference
@@ -527,3 +528,17 @@ def test_malformed_files_print_no_traceback_in_a_real_process(tmp_path):
                         "-o", "/proc/gsgeo-out", *ORIGIN], capture_output=True, text=True,
                        env=env, cwd=REPO)
     assert r.returncode == 2 and "Traceback" not in r.stderr and "/proc" in r.stderr
+
+
+def test_outdir_filled_during_the_build_is_not_replaced(tmp_path, ply, monkeypatch):
+    out = tmp_path / "out"
+    georef = Georeference("origin", origin=(52, 0, 0))
+
+    def fill() -> None:        # someone writes into OUTDIR while the splats are read
+        out.mkdir()
+        (out / "theirs.txt").write_text("theirs")
+
+    with pytest.raises(InputError, match="not a tileset written by gsgeo"):
+        build_tileset(ply, out, georef, progress=None, on_start=fill)
+    assert (out / "theirs.txt").read_text() == "theirs"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.ply"]

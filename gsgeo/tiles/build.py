@@ -477,6 +477,8 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
                                           "operation": placement.operation,
                                           "splats": n, "sh_degree": sh_degree,
                                           "root_frame": "ENU at the scene centre (WGS 84)"}})
+            # again: OUTDIR may have been made or filled while the build ran
+            outdir_mod.check_output(src_path, out, overwrite)
             _commit(tmp, dest)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
