@@ -40,8 +40,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def resolve_token(host: str, environ: dict | None = None) -> tuple[str | None, bool]:
-    """(token, generated): GSGEO_TOKEN when set; off loopback a fresh one; else none."""
-    from gsgeo.server.app import is_loopback
+    """(token, generated): GSGEO_TOKEN when set; off loopback a fresh one; else none.
+
+    Loopback means every address ``host`` resolves to is a loopback address
+    (gsgeo.server.hosts); a name that does not resolve is not loopback."""
+    from gsgeo.server.hosts import is_loopback
 
     env = os.environ if environ is None else environ
     token = (env.get("GSGEO_TOKEN") or "").strip() or None
@@ -60,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
     data = Path(args.data)
     if data.exists() and not data.is_dir():
         raise InputError(f"--data {data}: is not a directory")
+    from gsgeo.server.hosts import resolved_addresses
+
+    if not resolved_addresses(args.host):
+        raise InputError(f"--host {args.host}: does not resolve to an address to bind")
     token, generated = resolve_token(args.host)
     log_level = getattr(args, "log_level", "warning")
     if generated:

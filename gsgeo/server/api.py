@@ -331,13 +331,17 @@ def import_check_points(
         raise InputError(f"format: cannot tell the format of '{file.filename}'; give format="
                          f"{'|'.join(FORMATS)}")
     data = file.file.read()
-    rows, file_crs = read_check_points(data, fmt)
+    rows, file_crs = read_check_points(data, fmt, file.filename)
     crs = (crs or "").strip() or file_crs or ("EPSG:4979" if fmt == "geojson" else None)
     if crs is None:
         raise InputError("crs: state the CRS the file's coordinates are in, e.g. EPSG:27700")
     n = svc(request).add_check_points(pid, rows, crs, role=role, replace=replace,
                                       source=(file.filename or "")[:300])
     return {"imported": n, "crs": crs, "format": fmt}
+
+
+#: Endpoints that take files: their bodies may reach ServerConfig.max_upload, not max_body.
+UPLOAD_ENDPOINTS = frozenset({import_check_points})
 
 
 @router.delete("/projects/{pid}/checkpoints", summary="Delete all check points of a project")

@@ -1,6 +1,9 @@
 """The FastAPI application: web client at /, Cesium at /cesium/, scenes at /scenes/, API at /api.
 
 ``create_app(ServerConfig(data_dir=...))`` builds it; ``gsgeo serve`` runs it with uvicorn.
+Of the web directory only the app is served (``WEB_FILES`` and ``js/``), not its package
+files or node_modules; a known path asked with a method it does not serve gets 405 with
+``Allow``.
 """
 
 from __future__ import annotations
@@ -21,8 +24,12 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gsgeo import __version__
 from gsgeo.errors import GsgeoError
+from gsgeo.server.faults import CatchAll
 from gsgeo.server.files import file_response
 from gsgeo.server.guard import BodyTooLarge, Guard, MiB
+from gsgeo.server.hosts import is_loopback
+from gsgeo.server.routing import allowed_methods, body_limiter
+from gsgeo.server.scenes import scene_dir, store_file_ids
 from gsgeo.server.solver import SolverPool
 from gsgeo.store import ConflictError, NotFoundError, Projects, StoreError, open_store
 
@@ -58,10 +65,6 @@ class ServerConfig:
                 self.cesium_dir = Path(self.web_dir) / "cesium"
         if self.allowed_hosts is None and is_loopback(self.host):
             self.allowed_hosts = LOOPBACK_HOSTS | {self.host.lower()}
-
-
-def is_loopback(host: str) -> bool:
-    return host in ("127.0.0.1", "localhost", "::1") or host.startswith("127.")
 
 
 def _field_of(message: str) -> str | None:
@@ -131,24 +134,25 @@ def _install_error_handlers(app: FastAPI) -> None:
         return _error(413, str(exc), "body")
 
     @app.exception_handler(StarletteHTTPException)
-    async def http_error(_req: Request, exc: StarletteHTTPException) -> Response:
+    async def http_error(req: Request, exc: StarletteHTTPException) -> Response:
         if isinstance(exc.__cause__, BodyTooLarge):
             return _error(413, str(exc.__cause__), "body")
         msg = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
         status = exc.status_code
         if status == 400 and "parsing the body" in msg:
             status, msg = 422, "body: cannot be parsed (malformed JSON, not UTF-8, or bad form data)"
+        headers = dict(exc.headers or {})
+        if status == 405:  # every method of the path, not only those of the first route
+            allow = allowed_methods(app.router.routes, req.scope)
+            headers["Allow"] = ", ".join(allow)
+            msg = f"method {req.method} is not allowed here; allowed: {', '.join(allow)}"
         resp = _error(status, msg, "body" if msg.startswith("body") else None)
-        for k, v in (exc.headers or {}).items():
-            resp.headers[k] = v
+        resp.headers.update(headers)
         return resp
 
-    @app.exception_handler(Exception)
-    async def unexpected(_req: Request, exc: Exception) -> JSONResponse:
-        log.exception("unexpected error")
-        return _error(500, f"internal error ({type(exc).__name__}); the server log has details")
 
-
+#: The files of the web directory served at the root, besides index.html and js/.
+WEB_FILES = ("style.css", "favicon.svg")
 WEB_CACHE = "no-cache"
 CESIUM_CACHE = "public, max-age=86400"
 SCENE_CACHE = "no-cache"  # tiles revalidate by ETag: a regenerated scene is never stale
@@ -190,8 +194,11 @@ def create_app(config: ServerConfig, store=None) -> FastAPI:
     # other and halved tile throughput with 8 clients).
     @app.api_route("/scenes/{name}/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
     def scene_file(name: str, rel: str, request: Request) -> Response:
-        return file_response(request, config.data_dir / "scenes" / name, rel, SCENE_CACHE) \
-            if _safe_name(name) else _error(404, "no such scene")
+        folder = scene_dir(config.data_dir, name)
+        if folder is None:
+            return _error(404, "no such scene")
+        return file_response(request, folder, rel, SCENE_CACHE,
+                             refuse=store_file_ids(config.data_dir))
 
     @app.api_route("/cesium/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
     def cesium_file(rel: str, request: Request) -> Response:
@@ -207,21 +214,32 @@ def create_app(config: ServerConfig, store=None) -> FastAPI:
     def api_root() -> Response:
         return RedirectResponse("/docs")
 
-    @app.api_route("/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
-    def web_file(rel: str, request: Request) -> Response:
-        if rel.startswith(("api/", "node_modules/")) or rel.split("/", 1)[0].startswith("."):
-            return _error(404, f"not found: /{rel}")
-        return file_response(request, Path(config.web_dir), rel, WEB_CACHE)
+    @app.api_route("/index.html", methods=["GET", "HEAD"], include_in_schema=False)
+    def index_html(request: Request) -> Response:
+        return index(request)
 
+    def web_file(name: str) -> None:
+        def serve(request: Request) -> Response:
+            return file_response(request, Path(config.web_dir), name, WEB_CACHE)
+
+        app.add_api_route(f"/{name}", serve, methods=["GET", "HEAD"], include_in_schema=False,
+                          name=f"web {name}")
+
+    for name in WEB_FILES:
+        web_file(name)
+
+    @app.api_route("/js/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
+    def js_file(rel: str, request: Request) -> Response:
+        return file_response(request, Path(config.web_dir) / "js", rel, WEB_CACHE)
+
+    from gsgeo.server.api import UPLOAD_ENDPOINTS
+
+    # Uploads exist only under /api: the API router's own routes, in order, decide the limit.
     app.add_middleware(Guard, token=config.token, allowed_hosts=config.allowed_hosts,
-                       max_body=config.max_body, max_upload=config.max_upload)
+                       body_limit=body_limiter(router.routes, config.max_body,
+                                               config.max_upload, UPLOAD_ENDPOINTS))
+    app.add_middleware(CatchAll)  # outermost: also catches what the guard lets through
     return app
-
-
-def _safe_name(name: str) -> bool:
-    from gsgeo.store.validate import SLUG
-
-    return bool(SLUG.match(name))
 
 
 CONFIG_ENV = "GSGEO_SERVE_CONFIG"

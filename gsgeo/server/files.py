@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import os
 import stat
+from collections.abc import Collection
 from email.utils import formatdate, parsedate_to_datetime
 from pathlib import Path
 
@@ -100,8 +101,10 @@ def _not_modified(request: Request, etag: str, mtime: float) -> bool:
     return False
 
 
-def file_response(request: Request, root: Path, rel: str, cache_control: str) -> Response:
-    """Serve ``root/rel`` (404 when absent or outside root)."""
+def file_response(request: Request, root: Path, rel: str, cache_control: str,
+                  refuse: Collection[tuple[int, int]] = ()) -> Response:
+    """Serve ``root/rel`` (404 when absent or outside root, or when its (device, inode) is in
+    ``refuse``)."""
     path = safe_path(root, rel)
     if path is None:
         return Response("not found", status_code=404, media_type="text/plain")
@@ -109,7 +112,7 @@ def file_response(request: Request, root: Path, rel: str, cache_control: str) ->
         st = path.stat()
     except OSError:
         return Response("not found", status_code=404, media_type="text/plain")
-    if not stat.S_ISREG(st.st_mode):
+    if not stat.S_ISREG(st.st_mode) or (st.st_dev, st.st_ino) in refuse:
         return Response("not found", status_code=404, media_type="text/plain")
     etag = etag_of(st)
     headers = {"ETag": etag, "Last-Modified": formatdate(st.st_mtime, usegmt=True),
@@ -128,6 +131,8 @@ def file_response(request: Request, root: Path, rel: str, cache_control: str) ->
             st2 = os.fstat(f.fileno())
             data = f.read()
     except OSError:
+        return Response("not found", status_code=404, media_type="text/plain")
+    if (st2.st_dev, st2.st_ino) in refuse:  # swapped for a refused file since the stat
         return Response("not found", status_code=404, media_type="text/plain")
     if (st2.st_mtime_ns, st2.st_size, st2.st_ino) != (st.st_mtime_ns, st.st_size, st.st_ino):
         headers["ETag"] = etag_of(st2)  # replaced between stat and open: describe what is sent

@@ -1,8 +1,14 @@
 """ASGI middleware guarding the server: body size limits, token, host and origin checks.
 
-- Request bodies over the limit get 413 (checked on Content-Length and while streaming).
+- Request bodies over the limit get 413 (checked on Content-Length and while streaming). The
+  limit is the one of the route the request reaches (``body_limit``, see
+  gsgeo.server.routing), so no path spelling earns a larger one.
 - When a token is configured, every /api request must carry it
-  (``Authorization: Bearer TOKEN`` or ``X-Gsgeo-Token: TOKEN``); otherwise 401.
+  (``Authorization: Bearer TOKEN`` or ``X-Gsgeo-Token: TOKEN``), and so must every /scenes
+  request, where the cookie ``gsgeo-token[-PORT]=TOKEN`` also counts (the viewer sets it
+  from ``#token=`` so that Cesium's own tile requests carry it); otherwise 401. The API
+  takes no cookie: a browser sends cookies by itself, headers only when a script adds them,
+  so no page of another site can make a request count as the user's.
 - The Host header must be one the server answers to (defeats DNS rebinding on loopback).
 - An /api request from a browser page of another origin (``Origin`` header not matching the
   Host) gets 403: CORS is closed, and this also stops cross-site form posts.
@@ -14,6 +20,9 @@ import json
 import secrets
 from collections.abc import Awaitable, Callable
 from typing import Any
+from urllib.parse import unquote
+
+from starlette.requests import cookie_parser
 
 Scope = dict[str, Any]
 Message = dict[str, Any]
@@ -21,6 +30,9 @@ ASGIApp = Callable[[Scope, Callable[[], Awaitable[Message]], Callable[[Message],
                    Awaitable[None]]
 
 MiB = 1024 * 1024
+
+#: Name (or name prefix, ``gsgeo-token-PORT``) of the cookie that carries the token to /scenes.
+TOKEN_COOKIE = "gsgeo-token"
 
 
 class BodyTooLarge(Exception):
@@ -47,18 +59,39 @@ def _host_name(host: str) -> str:
     return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
 
 
+def presented_tokens(headers: dict[str, str], with_cookie: bool) -> list[str]:
+    """The tokens a request offers: X-Gsgeo-Token, a Bearer Authorization and, when
+    ``with_cookie``, the values of the ``gsgeo-token`` cookies."""
+    out = []
+    if "x-gsgeo-token" in headers:
+        out.append(headers["x-gsgeo-token"])
+    auth = headers.get("authorization", "")
+    if auth[:7].lower() == "bearer ":
+        out.append(auth[7:].strip())
+    if with_cookie and "cookie" in headers:
+        for name, value in cookie_parser(headers["cookie"]).items():
+            if name == TOKEN_COOKIE or name.startswith(TOKEN_COOKIE + "-"):
+                out.append(unquote(value))
+    return out
+
+
 class Guard:
-    """The middleware. ``allowed_hosts`` None (or containing "*") accepts any Host."""
+    """The middleware. ``allowed_hosts`` None (or containing "*") accepts any Host;
+    ``body_limit(scope)`` is the body limit in bytes of the request's route."""
 
     def __init__(self, app: ASGIApp, *, token: str | None, allowed_hosts: set[str] | None,
-                 max_body: int, max_upload: int, upload_paths: tuple[str, ...] = ("/import",)):
+                 body_limit: Callable[[Scope], int]):
         self.app = app
         self.token = token
         self.allowed_hosts = ({h.lower() for h in allowed_hosts}
                               if allowed_hosts and "*" not in allowed_hosts else None)
-        self.max_body = max_body
-        self.max_upload = max_upload
-        self.upload_paths = upload_paths
+        self.body_limit = body_limit
+
+    def _token_ok(self, headers: dict[str, str], with_cookie: bool) -> bool:
+        want = self.token.encode()  # type: ignore[union-attr]
+        # every candidate compared, so the time taken does not tell which one came close
+        return any([secrets.compare_digest(t.encode(), want)
+                    for t in presented_tokens(headers, with_cookie)])
 
     async def __call__(self, scope: Scope, receive, send) -> None:
         if scope["type"] != "http":
@@ -70,7 +103,8 @@ class Guard:
         if self.allowed_hosts is not None and _host_name(host) not in self.allowed_hosts:
             await _send_json(send, 400, f"Host header '{host[:80]}' is not served here", "Host")
             return
-        if path == "/api" or path.startswith("/api/"):
+        is_api = path == "/api" or path.startswith("/api/")
+        if is_api:
             origin = headers.get("origin")
             if origin is not None and origin != "null":
                 o = origin.split("://", 1)[-1].rstrip("/").lower()
@@ -82,18 +116,23 @@ class Guard:
                 await _send_json(send, 403, "requests from an opaque origin are not allowed",
                                  "Origin")
                 return
-            if self.token is not None:
-                given = headers.get("x-gsgeo-token")
-                auth = headers.get("authorization", "")
-                if given is None and auth[:7].lower() == "bearer ":
-                    given = auth[7:].strip()
-                if given is None or not secrets.compare_digest(given.encode(), self.token.encode()):
-                    await _send_json(send, 401, "a valid token is required: send "
-                                     "'Authorization: Bearer TOKEN' (see the server's start "
-                                     "message or GSGEO_TOKEN)", "Authorization",
-                                     [(b"www-authenticate", b"Bearer")])
-                    return
-        limit = self.max_upload if path.endswith(self.upload_paths) else self.max_body
+        is_scene = path == "/scenes" or path.startswith("/scenes/")
+        if self.token is not None and (is_api or is_scene) \
+                and not self._token_ok(headers, with_cookie=is_scene):
+            await _send_json(send, 401, "a valid token is required: send "
+                             "'Authorization: Bearer TOKEN' (see the server's start "
+                             "message or GSGEO_TOKEN); the viewer takes it from "
+                             "/#token=TOKEN", "Authorization",
+                             [(b"www-authenticate", b"Bearer")])
+            return
+        limit: int | None = None
+
+        def body_limit() -> int:  # looked up only for requests that have a body
+            nonlocal limit
+            if limit is None:
+                limit = self.body_limit(scope)
+            return limit
+
         cl = headers.get("content-length")
         if cl is not None:
             try:
@@ -101,9 +140,9 @@ class Guard:
             except ValueError:
                 await _send_json(send, 400, "Content-Length is not a number", "Content-Length")
                 return
-            if n > limit:
+            if n > 0 and n > body_limit():
                 await _send_json(send, 413, f"request body of {n} bytes exceeds the limit of "
-                                 f"{limit} bytes", "body")
+                                 f"{body_limit()} bytes", "body")
                 return
         seen = 0
         started = False
@@ -113,8 +152,8 @@ class Guard:
             msg = await receive()
             if msg["type"] == "http.request":
                 seen += len(msg.get("body", b""))
-                if seen > limit:
-                    raise BodyTooLarge(limit)
+                if seen > 0 and seen > body_limit():
+                    raise BodyTooLarge(body_limit())
             return msg
 
         async def tracking_send(msg: Message) -> None:
@@ -127,5 +166,5 @@ class Guard:
             await self.app(scope, limited_receive, tracking_send)
         except BodyTooLarge:
             if not started:
-                await _send_json(send, 413, f"request body exceeds the limit of {limit} bytes",
-                                 "body")
+                await _send_json(send, 413, f"request body exceeds the limit of "
+                                 f"{body_limit()} bytes", "body")

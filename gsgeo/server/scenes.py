@@ -4,17 +4,29 @@ The georeference is read from the root tile's transform (column-major 4x4, ECEF 
 translation is the scene origin, given as WGS 84 longitude, latitude (degrees) and
 ellipsoidal height (metres). Bounds come from the root bounding volume (box, region or
 sphere) as a longitude/latitude/height box.
+
+A scene is a folder whose real path (links followed) lies inside the real scenes folder
+``DATA/scenes``: a linked scene folder pointing elsewhere is neither listed nor served. To keep
+tilesets on another disk, make ``DATA/scenes`` itself the link. A scenes folder that is the
+data directory or encloses it serves nothing, and the store's own files are never served
+whatever the links (``store_file_ids``).
 """
 
 from __future__ import annotations
 
+import os
 import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from gsgeo.store import DB_NAME
 from gsgeo.store.validate import SLUG
+
+#: The store file and the files SQLite keeps beside it.
+STORE_SUFFIXES = ("", "-wal", "-shm", "-journal")
 
 _cache: dict[Path, tuple[tuple[int, int], dict[str, Any]]] = {}
 _cache_lock = threading.Lock()
@@ -84,12 +96,56 @@ def scene_info(scene_dir: Path) -> dict[str, Any]:
     return info
 
 
-def list_scenes(data_dir: Path) -> list[dict[str, Any]]:
+def scenes_root(data_dir: Path) -> Path | None:
+    """The real path of ``DATA/scenes``, or None when it is missing or is (or encloses) the
+    data directory, which holds the project store."""
+    try:
+        root = (data_dir / "scenes").resolve(strict=True)
+        data = data_dir.resolve(strict=True)
+    except (OSError, RuntimeError):
+        return None
+    if not root.is_dir() or data.is_relative_to(root):
+        return None
+    return root
+
+
+def scene_dir(data_dir: Path, name: str) -> Path | None:
+    """The real folder of scene ``name``, or None unless ``name`` is a scene name and the
+    folder, links followed, lies strictly inside the real scenes folder."""
+    root = scenes_root(data_dir)
+    if root is None or not SLUG.match(name):
+        return None
+    try:
+        path = (root / name).resolve(strict=True)
+    except (OSError, RuntimeError):
+        return None
+    if path == root or not path.is_relative_to(root) or not path.is_dir():
+        return None
+    return path
+
+
+def store_file_ids(data_dir: Path) -> set[tuple[int, int]]:
+    """(device, inode) of the store's files as they are now: never served, whatever the
+    path or link that reaches them (hard links included)."""
+    ids = set()
+    for suffix in STORE_SUFFIXES:
+        try:
+            st = os.stat(data_dir / f"{DB_NAME}{suffix}")
+        except OSError:
+            continue
+        ids.add((st.st_dev, st.st_ino))
+    return ids
+
+
+def _scene_dirs(data_dir: Path) -> Iterator[Path]:
     root = data_dir / "scenes"
-    if not root.is_dir():
-        return []
-    out = []
+    if scenes_root(data_dir) is None:
+        return
     for d in sorted(root.iterdir()):
-        if d.is_dir() and SLUG.match(d.name) and (d / "tileset.json").is_file():
-            out.append(scene_info(d))
-    return out
+        if scene_dir(data_dir, d.name) is not None and (d / "tileset.json").is_file():
+            yield d
+
+
+def list_scenes(data_dir: Path) -> list[dict[str, Any]]:
+    """Every servable scene of the data directory with its georeference (``scene_info``)."""
+    return [scene_info(d) for d in _scene_dirs(data_dir)]
