@@ -4,17 +4,24 @@ Every file yields (id, x, y, z) in the CRS the user states, x = easting (or long
 northing (or latitude), z = height or None. The id column is the first of ``point_id``, ``id``,
 ``name``, ``label`` found (case-insensitive); CSV coordinates come from ``easting/northing/
 height``, ``e/n/h``, ``x/y/z`` or ``lon/lat/h``.
+
+The files come from users and the network, so reading is bounded: CSV fields up to the csv
+module's field limit (128 KiB), JSON nesting up to orjson's depth limit (1024), numbers that
+fit a double, at most ``MAX_CHECK_POINTS`` points (counted while reading), and GeoPackages
+only when they are SQLite files (no other GDAL format, which could name files on the
+server). Every failure is an InputError naming the file and what is wrong in it.
 """
 
 from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 import warnings
 from dataclasses import dataclass
 from typing import Any
+
+import orjson
 
 from gsgeo.errors import InputError
 from gsgeo.store.validate import item_id
@@ -25,6 +32,7 @@ Y_COLUMNS = ("northing", "n", "y", "lat", "latitude")
 Z_COLUMNS = ("height", "h", "z", "elevation", "alt", "h_wgs84")
 FORMATS = ("csv", "geojson", "gpkg")
 MAX_CHECK_POINTS = 100_000
+SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
 @dataclass
@@ -48,10 +56,14 @@ def _num(value: Any, where: str, optional: bool = False) -> float | None:
         if optional:
             return None
         raise InputError(f"{where}: missing")
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        raise InputError(f"{where}: expected a number, got {type(value).__name__}")
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise InputError(f"{where}: expected a number, got {str(value)[:30]!r}") from None
+        raise InputError(f"{where}: expected a number, got {value[:30]!r}") from None
+    except OverflowError:
+        raise InputError(f"{where}: the number is too large") from None
     if not math.isfinite(v):
         if optional and math.isnan(v):
             return None
@@ -67,30 +79,43 @@ def _pick(columns: list[str], names: tuple[str, ...]) -> str | None:
     return None
 
 
+def _count(rows: list[CheckPointRow]) -> None:
+    if len(rows) > MAX_CHECK_POINTS:
+        raise InputError(f"more than {MAX_CHECK_POINTS} check points")
+
+
 def _read_csv(data: bytes) -> list[CheckPointRow]:
     try:
         text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise InputError("file: a CSV file must be UTF-8 text") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"a CSV file must be UTF-8 text (byte {exc.start} is not)") from None
     try:
         dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t")
     except csv.Error:
         dialect = csv.excel
     reader = csv.DictReader(io.StringIO(text), dialect=dialect)
-    cols = reader.fieldnames or []
-    cid, cx, cy = _pick(cols, ID_COLUMNS), _pick(cols, X_COLUMNS), _pick(cols, Y_COLUMNS)
-    cz = _pick(cols, Z_COLUMNS)
-    if cid is None or cx is None or cy is None:
-        raise InputError(
-            "file: the CSV header needs an id column (point_id, id or name) and coordinate "
-            f"columns (easting/northing[/height] or x/y[/z]); found {', '.join(cols)[:200]}")
-    rows = []
-    for i, r in enumerate(reader, start=2):
-        where = f"file line {i}"
-        rows.append(CheckPointRow(item_id(r.get(cid), f"{where}, column {cid}"),
-                                  _num(r.get(cx), f"{where}, column {cx}"),
-                                  _num(r.get(cy), f"{where}, column {cy}"),
-                                  _num(r.get(cz), f"{where}, column {cz}", True) if cz else None))
+    rows: list[CheckPointRow] = []
+    try:
+        cols = reader.fieldnames or []
+        cid, cx, cy = _pick(cols, ID_COLUMNS), _pick(cols, X_COLUMNS), _pick(cols, Y_COLUMNS)
+        cz = _pick(cols, Z_COLUMNS)
+        if cid is None or cx is None or cy is None:
+            raise InputError(
+                "the CSV header needs an id column (point_id, id or name) and coordinate "
+                f"columns (easting/northing[/height] or x/y[/z]); found {', '.join(cols)[:200]!r}")
+        for r in reader:
+            where = f"line {reader.line_num}"
+            rows.append(CheckPointRow(
+                item_id(r.get(cid), f"{where}, column {cid}"),
+                _num(r.get(cx), f"{where}, column {cx}"),
+                _num(r.get(cy), f"{where}, column {cy}"),
+                _num(r.get(cz), f"{where}, column {cz}", True) if cz else None))
+            _count(rows)
+    except csv.Error as exc:
+        limit = csv.field_size_limit()
+        what = f"a field is longer than {limit} characters" if "field limit" in str(exc) \
+            else f"not readable as CSV ({exc})"
+        raise InputError(f"line {reader.line_num}: {what}") from None
     return rows
 
 
@@ -106,13 +131,16 @@ def _feature_id(props: dict, fallback: Any, where: str) -> str:
 
 def _read_geojson(data: bytes) -> list[CheckPointRow]:
     try:
-        doc = json.loads(data.decode("utf-8-sig"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"file: not valid GeoJSON: {exc}") from None
+        # orjson: bounded nesting, numbers as int64/uint64 or double (no inf, no NaN)
+        doc = orjson.loads(data.removeprefix(b"\xef\xbb\xbf"))
+    except orjson.JSONDecodeError as exc:
+        raise InputError(f"not valid JSON: {exc}") from None
     if isinstance(doc, dict) and doc.get("type") == "Feature":
         doc = {"type": "FeatureCollection", "features": [doc]}
     if not isinstance(doc, dict) or not isinstance(doc.get("features"), list):
-        raise InputError("file: expected a GeoJSON FeatureCollection")
+        raise InputError("expected a GeoJSON FeatureCollection")
+    if len(doc["features"]) > MAX_CHECK_POINTS:
+        raise InputError(f"more than {MAX_CHECK_POINTS} check points")
     rows = []
     for i, f in enumerate(doc["features"]):
         where = f"features[{i}]"
@@ -137,42 +165,51 @@ def _read_geojson(data: bytes) -> list[CheckPointRow]:
 
 def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
     import pyogrio
+    from pyproj.exceptions import CRSError
 
+    # GDAL would open any format it knows (a VRT, say, that reads files of the server)
+    if not data.startswith(SQLITE_MAGIC):
+        raise InputError("not a GeoPackage (not an SQLite file)")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             layers = pyogrio.list_layers(io.BytesIO(data))
             point_layers = [name for name, gt in layers if gt and "point" in str(gt).lower()]
             if not point_layers:
-                raise InputError("file: the GeoPackage has no point layer")
-            df = pyogrio.read_dataframe(io.BytesIO(data), layer=point_layers[0])
+                raise InputError("the GeoPackage has no point layer")
+            df = pyogrio.read_dataframe(io.BytesIO(data), layer=point_layers[0],
+                                        max_features=MAX_CHECK_POINTS + 1)
+            cid = _pick([str(c) for c in df.columns if c != "geometry"], ID_COLUMNS)
+            if cid is None:
+                raise InputError(f"layer '{point_layers[0]}' has no point_id, id or name column")
+            file_crs = df.crs
     except InputError:
         raise
     except Exception as exc:  # GDAL raises its own error types for unreadable files
-        raise InputError(f"file: cannot be read as a GeoPackage: {exc}") from None
-    cid = _pick([str(c) for c in df.columns if c != "geometry"], ID_COLUMNS)
-    if cid is None:
-        raise InputError(f"file: layer '{point_layers[0]}' has no point_id, id or name column")
-    rows = []
+        raise InputError(f"cannot be read as a GeoPackage: {exc}") from None
+    rows: list[CheckPointRow] = []
     for i, (pid, geom) in enumerate(zip(df[cid], df.geometry, strict=True)):
         where = f"layer {point_layers[0]} feature {i}"
-        if geom is None or geom.geom_type != "Point":
+        if geom is None or geom.geom_type != "Point" or geom.is_empty:
             raise InputError(f"{where}: expected a Point geometry")
         z = geom.z if geom.has_z else None
+        pid = pid.item() if hasattr(pid, "item") else pid  # numpy scalar -> int, float, str
         rows.append(CheckPointRow(item_id(pid, f"{where}, column {cid}"),
-                                  _num(geom.x, f"{where} x"), _num(geom.y, f"{where} y"),
-                                  _num(z, f"{where} z", True)))
+                                  _num(float(geom.x), f"{where} x"),
+                                  _num(float(geom.y), f"{where} y"),
+                                  _num(None if z is None else float(z), f"{where} z", True)))
+        _count(rows)
     crs = None
-    if df.crs is not None:
-        epsg = df.crs.to_epsg()
-        crs = f"EPSG:{epsg}" if epsg else df.crs.to_wkt()
+    if file_crs is not None:
+        try:
+            epsg = file_crs.to_epsg()
+            crs = f"EPSG:{epsg}" if epsg else file_crs.to_wkt()
+        except CRSError as exc:
+            raise InputError(f"the layer's CRS cannot be read: {exc}") from None
     return rows, crs
 
 
-def read_check_points(data: bytes, fmt: str) -> tuple[list[CheckPointRow], str | None]:
-    """Rows of a check-point file and the CRS the file itself declares (GeoPackage only)."""
-    if fmt not in FORMATS:
-        raise InputError(f"format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+def _rows(data: bytes, fmt: str) -> tuple[list[CheckPointRow], str | None]:
     if fmt == "csv":
         rows, crs = _read_csv(data), None
     elif fmt == "geojson":
@@ -180,12 +217,25 @@ def read_check_points(data: bytes, fmt: str) -> tuple[list[CheckPointRow], str |
     else:
         rows, crs = _read_gpkg(data)
     if not rows:
-        raise InputError("file: contains no check points")
-    if len(rows) > MAX_CHECK_POINTS:
-        raise InputError(f"file: more than {MAX_CHECK_POINTS} check points")
+        raise InputError("contains no check points")
+    _count(rows)
     seen: set[str] = set()
     for r in rows:
         if r.id in seen:
-            raise InputError(f"file: duplicate point id '{r.id}'")
+            raise InputError(f"duplicate point id {r.id!r}")
         seen.add(r.id)
     return rows, crs
+
+
+def read_check_points(data: bytes, fmt: str,
+                      name: str | None = None) -> tuple[list[CheckPointRow], str | None]:
+    """Rows of a check-point file and the CRS the file itself declares (GeoPackage only).
+
+    A file that cannot be read raises InputError ``file: 'NAME': where: what is wrong``."""
+    if fmt not in FORMATS:
+        raise InputError(f"format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    try:
+        return _rows(data, fmt)
+    except InputError as exc:
+        label = repr(name[:100]) if name else f"the {fmt} file"
+        raise InputError(f"file: {label}: {exc}") from None
