@@ -12,7 +12,18 @@ function initialToken() {
   return sessionStorage.getItem(TOKEN_KEY);
 }
 
+// Cesium fetches tiles by itself, without our headers: the token goes to /scenes as a
+// cookie. Named by port, as cookies are shared by every port of a host; SameSite=Strict
+// keeps it out of requests other sites start. The API takes only the header.
+function setSceneCookie(value) {
+  if (!value) return;
+  const port = location.port || (location.protocol === "https:" ? "443" : "80");
+  const secure = location.protocol === "https:" ? "; Secure" : "";
+  document.cookie = `${TOKEN_KEY}-${port}=${encodeURIComponent(value)}; path=/; SameSite=Strict${secure}`;
+}
+
 const token = initialToken();
+setSceneCookie(token);
 
 export class ApiError extends Error {
   constructor(status, message, field) {
