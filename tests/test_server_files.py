@@ -29,8 +29,9 @@ def site(tmp_path):
     os.symlink(data / "secret.txt", scene / "escape.json")
     web = tmp_path / "web"
     (web / "node_modules" / "x").mkdir(parents=True)
+    (web / "js").mkdir()
     (web / "index.html").write_text("<!doctype html><title>gsgeo</title>")
-    (web / "app.js").write_text("console.log(1)")
+    (web / "js" / "app.js").write_text("console.log(1)")
     (web / "node_modules" / "x" / "a.js").write_text("x")
     cesium = tmp_path / "cesium"
     (cesium / "Widgets").mkdir(parents=True)
@@ -48,7 +49,7 @@ def site(tmp_path):
     ("/cesium/Cesium.js", "text/javascript"),
     ("/cesium/Widgets/widgets.css", "text/css"),
     ("/", "text/html"),
-    ("/app.js", "text/javascript"),
+    ("/js/app.js", "text/javascript"),
 ])
 def test_content_types_and_validators(site, path, ctype):
     r = site.get(path)
@@ -129,12 +130,13 @@ def test_missing_web_client_gives_a_pointer_to_the_api(tmp_path):
 
 def test_real_tileset_is_served(white_sculpture, tmp_path):
     data = tmp_path / "data"
-    (data / "scenes").mkdir(parents=True)
-    (data / "scenes" / "white").symlink_to(white_sculpture)
+    data.mkdir()
+    (data / "scenes").symlink_to(white_sculpture.parent)  # scenes kept elsewhere: link the root
+    name = white_sculpture.name
     with TestClient(create_app(ServerConfig(data_dir=data, allowed_hosts={"testserver"}))) as c:
-        ts = c.get("/scenes/white/tileset.json")
+        ts = c.get(f"/scenes/{name}/tileset.json")
         assert ts.status_code == 200
         uri = ts.json()["root"]["content"]["uri"]
-        r = c.get(f"/scenes/white/{uri}")
+        r = c.get(f"/scenes/{name}/{uri}")
         assert r.status_code == 200 and r.headers["content-type"] == "model/gltf-binary"
         assert r.content == (white_sculpture / uri).read_bytes()
