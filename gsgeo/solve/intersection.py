@@ -165,11 +165,16 @@ def _check_ranges(o: np.ndarray, d: np.ndarray, norm: np.ndarray) -> tuple[np.nd
     Out of these ranges the squares in the normal equations overflow or underflow, and
     would surface as a false "zero-length" or "behind the camera".
     """
-    far = np.abs(o).max(axis=-1) > limits.MAX_ORIGIN_M / math.sqrt(3)
-    if far.any():  # the exact (scaled) length decides for the few candidates
-        far[far] = np.hypot.reduce(o[far], axis=-1) > limits.MAX_ORIGIN_M
-    bad_d = ~((norm >= limits.DIRECTION_MIN) & (norm <= limits.DIRECTION_MAX))
-    return far, bad_d
+    box = limits.MAX_ORIGIN_M / math.sqrt(3)  # inside this cube every origin is in range
+    if o.size and max(-float(o.min()), float(o.max())) <= box:  # the usual case: two reductions
+        far = np.zeros(o.shape[:-1], dtype=bool)
+    else:
+        far = np.abs(o).max(axis=-1) > box
+        if far.any():  # the exact (scaled) length decides for the few candidates
+            far[far] = np.hypot.reduce(o[far], axis=-1) > limits.MAX_ORIGIN_M
+    if norm.size and norm.min() >= limits.DIRECTION_MIN and norm.max() <= limits.DIRECTION_MAX:
+        return far, np.zeros(norm.shape, dtype=bool)
+    return far, ~((norm >= limits.DIRECTION_MIN) & (norm <= limits.DIRECTION_MAX))
 
 
 def _direction_message(d: np.ndarray, bad: np.ndarray) -> str:
