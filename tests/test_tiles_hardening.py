@@ -499,6 +499,7 @@ def compressed_ply_files(draw) -> bytes:
     return head + body[:cut]
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")     # it would print beside the message
 @settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
 @given(data=st.one_of(ply_files(), compressed_ply_files()))
 def test_fuzzed_ply_never_tracebacks(tmp_path_factory, capsys, data):

@@ -188,7 +188,9 @@ def compressed_bounds(layout: CompressedLayout) -> tuple[np.ndarray, np.ndarray,
     chunks = np.fromfile(layout.path, layout.chunk_dtype, layout.n_chunks,
                          offset=layout.chunk_offset)
     for i, c in enumerate("xyz"):
-        lo[i], hi[i] = np.nanmin(chunks[f"min_{c}"]), np.nanmax(chunks[f"max_{c}"])
+        # NaN-ignoring, and quiet when every chunk is NaN (then not finite: n = 0)
+        lo[i] = np.fmin.reduce(chunks[f"min_{c}"], initial=np.inf)
+        hi[i] = np.fmax.reduce(chunks[f"max_{c}"], initial=-np.inf)
     n = layout.count if np.isfinite(lo).all() and np.isfinite(hi).all() else 0
     return lo, hi, n
 
