@@ -304,35 +304,28 @@ def test_killed_build_leaves_no_workers_and_the_next_run_cleans_up(tmp_path, rng
 
 def test_stale_temporaries_are_told_by_their_owner(tmp_path):
     me = swap.owner_tag()
-    boot, pid, start = me.split("-")
+    boot, ns, pid, start = me.split("-")
     done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                           capture_output=True, text=True, check=True)
+    gone = done.stdout.strip()
+    other_boot = "f" * 8 if boot != "f" * 8 else "0" * 8
     names = {
-        f".out.gsgeo-{me}-abc.tmp": False,                               # this live process
-        f".out.gsgeo-{boot}-{pid}-{int(start) + 1}-abc.tmp": True,       # pid reused
-        f".out.gsgeo-{boot}-{done.stdout.strip()}-{start}-abc.tmp": True,  # exited
-        f".x.y.gsgeo-{'f' * 8 if boot != 'f' * 8 else '0' * 8}-{pid}-{start}-abc.tmp": True,
-        ".out.abcdefgh.tmp": False,                                      # older gsgeo / other
-        f"out.gsgeo-{boot}-{done.stdout.strip()}-{start}-abc.tmp": False,  # not hidden
+        f".out.gsgeo-{me}-abc.tmp": False,                                   # this process
+        f".out.gsgeo-{boot}-{ns}-{pid}-{int(start) + 1}-abc.tmp": True,      # pid reused
+        f".out.gsgeo-{boot}-{ns}-{gone}-{start}-abc.tmp": True,              # exited
+        f".x.y.gsgeo-{other_boot}-{ns}-{pid}-{start}-abc.tmp": True,         # before a reboot
+        f".out.gsgeo-{boot}-{int(ns) + 1}-{gone}-{start}-abc.tmp": False,    # other namespace
+        ".out.abcdefgh.tmp": False,                                          # not ours
+        f"out.gsgeo-{boot}-{ns}-{gone}-{start}-abc.tmp": False,              # not hidden
     }
     for n in names:
         (tmp_path / n).mkdir()
-    (tmp_path / "file.gsgeo-1-2-3-x.tmp").write_text("x")
+    (tmp_path / f".f.gsgeo-{boot}-{ns}-{gone}-{start}-x.tmp").write_text("a file, not ours")
     removed = {p.name for p in swap.clean_stale(tmp_path)}
     assert removed == {n for n, stale in names.items() if stale}
     assert {p.name for p in tmp_path.iterdir()} == \
-        {n for n, stale in names.items() if not stale} | {"file.gsgeo-1-2-3-x.tmp"}
-
-
-def test_exchange_swaps_two_directories(tmp_path):
-    if not _has_exchange(tmp_path):
-        pytest.skip("renameat2(RENAME_EXCHANGE) is not available here")
-    (tmp_path / "a").mkdir()
-    (tmp_path / "a" / "x").write_text("a")
-    (tmp_path / "b").mkdir()
-    (tmp_path / "b" / "x").write_text("b")
-    assert swap.exchange(tmp_path / "a", tmp_path / "b")
-    assert (tmp_path / "a" / "x").read_text() == "b" and (tmp_path / "b" / "x").read_text() == "a"
+        {n for n, stale in names.items() if not stale} | \
+        {f".f.gsgeo-{boot}-{ns}-{gone}-{start}-x.tmp"}
 
 
 WATCHER = """
@@ -357,6 +350,17 @@ def _has_exchange(folder: Path) -> bool:
     finally:
         os.rmdir(folder / "probe-a")
         os.rmdir(folder / "probe-b")
+
+
+def test_exchange_swaps_two_directories(tmp_path):
+    if not _has_exchange(tmp_path):
+        pytest.skip("renameat2(RENAME_EXCHANGE) is not available here")
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "x").write_text("a")
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "x").write_text("b")
+    assert swap.exchange(tmp_path / "a", tmp_path / "b")
+    assert (tmp_path / "a" / "x").read_text() == "b" and (tmp_path / "b" / "x").read_text() == "a"
 
 
 @pytest.mark.parametrize("exchange", [True, False])

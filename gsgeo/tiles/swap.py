@@ -1,10 +1,12 @@
 """Atomic replacement of a tileset directory: owned temporaries, their clean-up, the swap.
 
 A build writes into a temporary directory beside OUTDIR named
-``.NAME.gsgeo-BOOT-PID-START-XXXXXXXX.tmp``: BOOT is the start of the kernel's boot id, PID
-the building process and START its start time (clock ticks since boot, /proc/PID/stat), so a
-later run can tell a temporary whose owner is gone (killed, machine rebooted) from one still
-being written, even after the pid was reused. :func:`clean_stale` removes the former.
+``.NAME.gsgeo-BOOT-NS-PID-START-XXXXXXXX.tmp``: BOOT is the start of the kernel's boot id,
+NS the building process's pid namespace, PID the process and START its start time (clock
+ticks since boot, /proc/PID/stat), so a later run can tell a temporary whose owner is gone
+(killed, machine rebooted) from one still being written, even after the pid was reused.
+:func:`clean_stale` removes the former; a temporary of another pid namespace (a container
+sharing the folder) cannot be told and is left alone.
 
 :func:`commit` puts the finished directory in place. Where OUTDIR exists, Linux's
 ``renameat2(RENAME_EXCHANGE)`` swaps the two directories in one step, so OUTDIR exists at
@@ -29,7 +31,8 @@ from pathlib import Path
 #: renameat2 flag: swap the two paths atomically (linux/fs.h).
 RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
-_OURS = re.compile(r"^\..*\.gsgeo-(?P<boot>[0-9a-f]{8})-(?P<pid>\d+)-(?P<start>\d+)-[^.]+\.tmp$")
+_OURS = re.compile(r"^\..*\.gsgeo-(?P<boot>[0-9a-f]{8})-(?P<ns>\d+)-(?P<pid>\d+)-(?P<start>\d+)"
+                   r"-[^.]+\.tmp$")
 #: Longest part of OUTDIR's name put into a temporary's name (file names end at 255 bytes).
 _NAME_PART = 64
 
@@ -40,6 +43,13 @@ def _boot_id() -> str:
             return f.read().strip().replace("-", "")[:8].lower()
     except OSError:
         return "00000000"
+
+
+def _pid_namespace() -> int:
+    try:
+        return os.stat("/proc/self/ns/pid").st_ino
+    except OSError:
+        return 0
 
 
 def _start_ticks(pid: int) -> int | None:
@@ -67,9 +77,9 @@ def _alive_without_proc(pid: int) -> int | None:
 
 
 def owner_tag() -> str:
-    """``BOOT-PID-START`` of this process, as put into its temporaries' names."""
+    """``BOOT-NS-PID-START`` of this process, as put into its temporaries' names."""
     pid = os.getpid()
-    return f"{_boot_id()}-{pid}-{_start_ticks(pid) or 0}"
+    return f"{_boot_id()}-{_pid_namespace()}-{pid}-{_start_ticks(pid) or 0}"
 
 
 def is_stale(name: str) -> bool:
@@ -79,6 +89,8 @@ def is_stale(name: str) -> bool:
         return False
     if m["boot"] != _boot_id():
         return True     # made before the last reboot
+    if int(m["ns"]) != _pid_namespace():
+        return False    # its pid means another process here: cannot tell
     start = _start_ticks(int(m["pid"]))
     return start is None or (start != 0 and start != int(m["start"]))
 
