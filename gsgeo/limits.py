@@ -26,6 +26,10 @@ MAX_ORIGIN_M = 1e9
 DIRECTION_MIN = 1e-100
 DIRECTION_MAX = 1e100
 
+#: Integers given where text is expected (ids, codes) are used as text up to this size;
+#: str() of a huge integer is slow or refused by Python.
+MAX_INT_BITS = 256
+
 #: Control characters (Unicode Cc: C0, DEL and C1 such as U+0085), line and paragraph
 #: separators, and unpaired surrogates: never part of an id. str.strip() would silently
 #: remove some of them (U+0085, U+2028), so they are refused before any stripping.
@@ -97,7 +101,8 @@ def id_text(value: Any, where: str) -> str:
     Text or an integer; never empty or blank, never holding a control character, a line or
     paragraph separator or an unpaired surrogate (checked before any stripping).
     """
-    if isinstance(value, bool) or not isinstance(value, (str, int)):
+    if isinstance(value, bool) or not isinstance(value, (str, int)) or (
+            isinstance(value, int) and value.bit_length() > MAX_INT_BITS):
         raise InputError(f"{where}: expected text")
     v = str(value)
     bad = _BAD_ID_CHAR.search(v)

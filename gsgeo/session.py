@@ -130,6 +130,8 @@ def _describe(value: Any) -> str:
         return f"a list of {len(value)} items"
     if isinstance(value, dict):
         return "an object"
+    if isinstance(value, int) and value.bit_length() > limits.MAX_INT_BITS:
+        return f"an integer of {value.bit_length()} bits"
     return str(value)[:30]
 
 
@@ -155,7 +157,8 @@ def _vector(value: Any, n: int, where: str) -> np.ndarray:
 def _text(value: Any, where: str, default: str = "") -> str:
     if value is None:
         return default
-    if not isinstance(value, (str, int)) or isinstance(value, bool):
+    if not isinstance(value, (str, int)) or isinstance(value, bool) or (
+            isinstance(value, int) and value.bit_length() > limits.MAX_INT_BITS):
         raise InputError(f"{where}: expected text")
     return str(value)
 

@@ -398,3 +398,19 @@ def test_missing_geoid_is_one_message_before_solving(tmp_path, capsys, monkeypat
         code, stdout, err = solve(capsys, EXAMPLE, "--crs", "EPSG:27700", "--geoid", geoid)
         assert code == 2 and stdout == ""
         one_error(err, f"--geoid {geoid}: {words}")
+
+
+@pytest.mark.parametrize(("edit", "words"), [
+    (lambda d: d["points"][0].__setitem__("id", 10 ** 5000), r"points\[0\].id: expected text"),
+    (lambda d: d["points"][0].__setitem__("rays", 10 ** 5000), r"points\[0\].rays: .*integer"),
+    (lambda d: d["points"][0].__setitem__("code", 10 ** 5000), r"points\[0\].code: expected text"),
+    (lambda d: d.__setitem__("crs", 10 ** 5000), "crs: expected text"),
+])
+def test_huge_integers_in_a_decoded_document_are_input_errors(edit, words):
+    """Python refuses str() of an integer over 4300 digits (ValueError): never reached."""
+    doc = example()
+    edit(doc)
+    with pytest.raises(InputError, match=words):
+        parse_session(doc)
+    with pytest.raises(InputError, match="expected text"):
+        item_id(10 ** 5000, "id")
