@@ -238,7 +238,8 @@ def throughput_run(urls: list[str], seconds: float, clients: int = 8) -> dict:
 def make_scene(root: Path) -> Path:
     if (SHARED_SCENE / "tileset.json").is_file():
         (root / "scenes").mkdir(parents=True, exist_ok=True)
-        os.symlink(SHARED_SCENE, root / "scenes" / "bench")
+        # a copy: a linked scene folder leading out of the scenes root is not served
+        shutil.copytree(SHARED_SCENE, root / "scenes" / "bench")
         return root / "scenes" / "bench"
     scene = root / "scenes" / "bench"
     scene.mkdir(parents=True)

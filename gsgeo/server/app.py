@@ -29,7 +29,7 @@ from gsgeo.server.files import file_response
 from gsgeo.server.guard import BodyTooLarge, Guard, MiB
 from gsgeo.server.hosts import is_loopback
 from gsgeo.server.routing import allowed_methods, body_limiter
-from gsgeo.server.scenes import scene_dir, store_file_ids
+from gsgeo.server.scenes import SceneFolders
 from gsgeo.server.solver import SolverPool
 from gsgeo.store import ConflictError, NotFoundError, Projects, StoreError, open_store
 
@@ -190,15 +190,16 @@ def create_app(config: ServerConfig, store=None) -> FastAPI:
 
     app.include_router(router)
 
+    scene_folders = SceneFolders(config.data_dir)
+
     # Static files are read in the thread pool (on the event loop they serialised behind each
     # other and halved tile throughput with 8 clients).
     @app.api_route("/scenes/{name}/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
     def scene_file(name: str, rel: str, request: Request) -> Response:
-        folder = scene_dir(config.data_dir, name)
+        folder = scene_folders.folder(name)
         if folder is None:
             return _error(404, "no such scene")
-        return file_response(request, folder, rel, SCENE_CACHE,
-                             refuse=store_file_ids(config.data_dir))
+        return file_response(request, folder, rel, SCENE_CACHE, refuse=scene_folders.refused())
 
     @app.api_route("/cesium/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
     def cesium_file(rel: str, request: Request) -> Response:

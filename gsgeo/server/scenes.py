@@ -9,7 +9,7 @@ A scene is a folder whose real path (links followed) lies inside the real scenes
 ``DATA/scenes``: a linked scene folder pointing elsewhere is neither listed nor served. To keep
 tilesets on another disk, make ``DATA/scenes`` itself the link. A scenes folder that is the
 data directory or encloses it serves nothing, and the store's own files are never served
-whatever the links (``store_file_ids``).
+whatever the links (``SceneFolders.refused``).
 """
 
 from __future__ import annotations
@@ -96,56 +96,71 @@ def scene_info(scene_dir: Path) -> dict[str, Any]:
     return info
 
 
-def scenes_root(data_dir: Path) -> Path | None:
-    """The real path of ``DATA/scenes``, or None when it is missing or is (or encloses) the
-    data directory, which holds the project store."""
-    try:
-        root = (data_dir / "scenes").resolve(strict=True)
-        data = data_dir.resolve(strict=True)
-    except (OSError, RuntimeError):
-        return None
-    if not root.is_dir() or data.is_relative_to(root):
-        return None
-    return root
+class SceneFolders:
+    """The scene folders of one data directory that may be served (module docstring).
 
+    The data directory's real path is taken once, at first use: the store the server has
+    open lives there. Everything else is resolved at each call, so a link changed while the
+    server runs is judged as it is now."""
 
-def scene_dir(data_dir: Path, name: str) -> Path | None:
-    """The real folder of scene ``name``, or None unless ``name`` is a scene name and the
-    folder, links followed, lies strictly inside the real scenes folder."""
-    root = scenes_root(data_dir)
-    if root is None or not SLUG.match(name):
-        return None
-    try:
-        path = (root / name).resolve(strict=True)
-    except (OSError, RuntimeError):
-        return None
-    if path == root or not path.is_relative_to(root) or not path.is_dir():
-        return None
-    return path
+    def __init__(self, data_dir: Path):
+        self.data_dir = Path(data_dir)
+        self._data_real: str | None = None
 
+    def _data(self) -> str:
+        if self._data_real is None:
+            self._data_real = os.path.realpath(self.data_dir)
+        return self._data_real
 
-def store_file_ids(data_dir: Path) -> set[tuple[int, int]]:
-    """(device, inode) of the store's files as they are now: never served, whatever the
-    path or link that reaches them (hard links included)."""
-    ids = set()
-    for suffix in STORE_SUFFIXES:
+    def root(self) -> str | None:
+        """The real path of ``DATA/scenes``; None when it is missing or is (or encloses) the
+        data directory."""
         try:
-            st = os.stat(data_dir / f"{DB_NAME}{suffix}")
+            root = os.path.realpath(self.data_dir / "scenes", strict=True)
         except OSError:
-            continue
-        ids.add((st.st_dev, st.st_ino))
-    return ids
+            return None
+        data = self._data()
+        if data == root or data.startswith(root.rstrip("/") + "/"):
+            return None
+        return root  # a file here makes every scene path fail to resolve
 
+    def folder(self, name: str) -> Path | None:
+        """The real folder of scene ``name``; None unless ``name`` is a scene name and the
+        folder, links followed, lies strictly inside the real scenes folder."""
+        if not SLUG.match(name):
+            return None
+        root = self.root()
+        if root is None:
+            return None
+        try:
+            path = os.path.realpath(os.path.join(root, name), strict=True)
+        except OSError:
+            return None
+        if not path.startswith(root.rstrip("/") + "/"):
+            return None
+        return Path(path)  # a file, not a folder, serves nothing: nothing resolves inside it
 
-def _scene_dirs(data_dir: Path) -> Iterator[Path]:
-    root = data_dir / "scenes"
-    if scenes_root(data_dir) is None:
-        return
-    for d in sorted(root.iterdir()):
-        if scene_dir(data_dir, d.name) is not None and (d / "tileset.json").is_file():
-            yield d
+    def refused(self) -> set[tuple[int, int]]:
+        """(device, inode) of the store's files as they are now: never served, whatever the
+        path or link that reaches them (hard links included)."""
+        ids = set()
+        for suffix in STORE_SUFFIXES:
+            try:
+                st = os.stat(self.data_dir / f"{DB_NAME}{suffix}")
+            except OSError:
+                continue
+            ids.add((st.st_dev, st.st_ino))
+        return ids
+
+    def scenes(self) -> Iterator[Path]:
+        """``DATA/scenes/<name>`` of every servable scene with a tileset.json, by name."""
+        if self.root() is None:
+            return
+        for d in sorted((self.data_dir / "scenes").iterdir()):
+            if self.folder(d.name) is not None and (d / "tileset.json").is_file():
+                yield d
 
 
 def list_scenes(data_dir: Path) -> list[dict[str, Any]]:
     """Every servable scene of the data directory with its georeference (``scene_info``)."""
-    return [scene_info(d) for d in _scene_dirs(data_dir)]
+    return [scene_info(d) for d in SceneFolders(data_dir).scenes()]
