@@ -115,7 +115,7 @@ def _read_csv(data: bytes) -> list[CheckPointRow]:
         limit = csv.field_size_limit()
         what = f"a field is longer than {limit} characters" if "field limit" in str(exc) \
             else f"not readable as CSV ({exc})"
-        raise InputError(f"line {reader.line_num}: {what}") from None
+        raise InputError(f"line {reader.line_num + 1}: {what}") from None
     return rows
 
 
