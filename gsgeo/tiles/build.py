@@ -6,7 +6,8 @@ into shared memory (80 bytes a splat at SH degree 3, and 52 for the tree's colum
 tile tree (the root's prominent splats and first split in the parent, the rest of the root's
 split and the subtrees in the workers) -> tiles packed,
 compressed and written by the workers into a temporary directory beside OUTDIR, which is
-renamed into place at the end.
+marked as ours and swapped into place at the end (gsgeo.tiles.outdir says which OUTDIR may
+be written or replaced, gsgeo.tiles.swap how).
 """
 
 from __future__ import annotations

@@ -73,11 +73,6 @@ def foreign_entries(folder: Path) -> list[str]:
     return sorted(odd)
 
 
-def is_ours(folder: Path) -> bool:
-    """True when ``folder`` is a tileset directory written by gsgeo and holds nothing else."""
-    return (_has_marker(folder) or _written_by_old_gsgeo(folder)) and not foreign_entries(folder)
-
-
 def _within(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
