@@ -1,4 +1,4 @@
-"""The JSON API under /api (see DESIGN.md "HTTP"); shapes are documented at /docs.
+"""The JSON API under /api (README "API"); shapes are documented at /docs.
 
 Endpoints are plain (sync) functions: FastAPI runs them in its thread pool, so the event loop
 keeps parsing and answering (static files, other requests) while numpy and PROJ work, and
@@ -205,7 +205,7 @@ def get_session(pid: PID, request: Request) -> dict[str, Any]:
              summary="Import a session JSON document (points with rays, lines, polygons)")
 def import_session(pid: PID, request: Request,
                    body: Annotated[dict[str, Any], Body(description=(
-                       "session JSON (DESIGN.md); points are solved with the project's "
+                       "session JSON (README, \"Session JSON\"); points are solved with the project's "
                        "settings; all or nothing"))]) -> dict[str, Any]:
     return {"imported": svc(request).import_session(pid, body)}
 
