@@ -167,6 +167,8 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
     import pyogrio
     from pyproj.exceptions import CRSError
 
+    from gsgeo.crs import resolve as _resolve  # noqa: F401  (PROJ off the network before any use)
+
     # GDAL would open any format it knows (a VRT, say, that reads files of the server)
     if not data.startswith(SQLITE_MAGIC):
         raise InputError("not a GeoPackage (not an SQLite file)")
