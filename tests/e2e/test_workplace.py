@@ -472,3 +472,25 @@ def test_token_from_url_fragment(data_dir, browser):
     finally:
         proc.terminate()
         proc.communicate(timeout=10)
+
+
+def test_credits_name_cesiumjs_without_ion_branding(server, browser):
+    """Nothing comes from Cesium ion: the viewer's credit area names CesiumJS as text, shows
+    no ion logo and no link to cesium.com, and the page never loads the ion logo."""
+    p = Page(browser, f"{server}/?scene={SCENE}")
+    try:
+        credits = p.page.locator("#cesium .cesium-widget-credits")
+        p.page.wait_for_function(
+            "document.querySelector('#cesium .cesium-widget-credits').textContent.length > 0")
+        assert "CesiumJS" in credits.inner_text()
+        html = credits.inner_html().lower()
+        assert "ion-credit" not in html and "cesium ion" not in html, html
+        assert credits.locator("img").count() == 0, html
+        assert credits.locator("a[href*='cesium.com']").count() == 0, html
+        loaded = p.page.evaluate("performance.getEntriesByType('resource').map(e => e.name)")
+        assert not [u for u in loaded if "ion-credit" in u or "ion_credit" in u], loaded
+        ARTIFACTS.mkdir(exist_ok=True)
+        credits.screenshot(path=str(ARTIFACTS / "workplace_credits.png"), timeout=90_000)
+        assert p.errors == []
+    finally:
+        p.close()

@@ -34,6 +34,9 @@ const state = {
 // viewer
 
 Cesium.Ion.defaultAccessToken = "";
+// Nothing comes from Cesium ion, so no ion logo: CesiumJS is credited as text in its place
+// (the credits of shown data, e.g. a tileset's glTF copyright, stay as Cesium lists them).
+Cesium.CreditDisplay.cesiumCredit = new Cesium.Credit("CesiumJS", true);
 const viewer = new Cesium.Viewer("cesium", {
   baseLayer: false,
   baseLayerPicker: false,
