@@ -24,3 +24,15 @@ def white_sculpture() -> Path:
     if not (WHITE_SCULPTURE / "tileset.json").is_file():
         pytest.skip("../shared/data/white-sculpture is not present beside this checkout")
     return WHITE_SCULPTURE
+
+
+@pytest.fixture(scope="session")
+def white_sculpture_rebuilt(tmp_path_factory):
+    """The real tileset read, written as a PLY and rebuilt by `gsgeo tiles`, once per session
+    (tests.tiles_real.rebuild_ply_and_tiles): (the rebuilt tileset's folder, its Summary)."""
+    if not (WHITE_SCULPTURE / "tileset.json").is_file():
+        pytest.skip("../shared/data/white-sculpture is not present beside this checkout")
+    from tests.tiles_real import rebuild_ply_and_tiles
+
+    work = tmp_path_factory.mktemp("white-sculpture-rebuilt")
+    return work / "ours", rebuild_ply_and_tiles(WHITE_SCULPTURE, work, work / "ours")

@@ -11,7 +11,6 @@ from gsgeo.tiles.georef import ecef_to_geodetic
 from gsgeo.tiles.reader import read_tileset, splat_count
 from gsgeo.tiles.splats import quat_to_matrix
 from tests.tiles_helpers import TOL_COLOR, TOL_LOG_SCALE, TOL_POS_M, TOL_ROT_DEG, rotation_error_deg
-from tests.tiles_real import rebuild_ply_and_tiles
 
 
 def test_real_tileset_reads_in_ecef(white_sculpture):
@@ -29,12 +28,12 @@ def test_real_tileset_reads_in_ecef(white_sculpture):
 
 
 @pytest.mark.slow
-def test_rebuilt_ply_gives_the_same_ecef_splats(tmp_path, white_sculpture):
+def test_rebuilt_ply_gives_the_same_ecef_splats(white_sculpture, white_sculpture_rebuilt):
     cKDTree = pytest.importorskip("scipy.spatial").cKDTree
     orig = read_tileset(white_sculpture)
-    summary = rebuild_ply_and_tiles(white_sculpture, tmp_path, tmp_path / "ours")
+    rebuilt, summary = white_sculpture_rebuilt
     assert summary.splats_written == 690_573 and summary.dropped_nonfinite == 0
-    ours = read_tileset(tmp_path / "ours")
+    ours = read_tileset(rebuilt)
     assert ours.count == orig.count
     centre = orig.positions.mean(axis=0)
     dist, idx = cKDTree(ours.positions - centre).query(orig.positions - centre)

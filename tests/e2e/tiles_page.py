@@ -9,7 +9,6 @@ from __future__ import annotations
 import functools
 import http.server
 import threading
-import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -41,15 +40,30 @@ scene.skyAtmosphere.show = false;
 scene.sun.show = false;
 scene.moon.show = false;
 scene.backgroundColor = Cesium.Color.BLACK;
-window.state = {loaded: false, error: null};
-// loaded, and Cesium's splat primitive has built its textures and sorted the splats
-window.splatsStable = () => {
+window.state = {loaded: false, done: false, error: null, drawn: 0};
+// CesiumJS 1.145 (pinned) has no public signal that the splat primitive draws every selected
+// splat: its isStable is true while it still draws an older snapshot of a few tiles, and it
+// waits dozens of frames before it rebuilds (seconds each in SwiftShader). So the tileset
+// loads hidden (preloadWhenHidden), is shown once every tile is in, and the picture is done
+// when the frame just drawn holds one snapshot of all selected splats, sorted for this camera.
+function allSplatsDrawn() {
   const t = window.state.tileset, p = t && t.gaussianSplatPrimitive;
-  return window.state.loaded && !!p && p.isStable;
-};
+  const n = t ? t.statistics.numberOfPointsSelected : 0;
+  return !!p && t.show && t.tilesLoaded && n > 0 && p._numSplats === n &&
+    !p._pendingSnapshot && !p._needsSnapshotRebuild && !!p._drawCommand;
+}
+scene.postRender.addEventListener(() => {
+  if (window.state.done || !allSplatsDrawn()) return;
+  window.state.drawn = window.state.tileset.gaussianSplatPrimitive._numSplats;
+  window.state.done = true;
+  // nothing changes any more: stop drawing, so that the screenshot does not wait for
+  // further frames of hundreds of thousands of splats in software
+  viewer.useDefaultRenderLoop = false;
+});
 (async () => {
   try {
-    const tileset = await Cesium.Cesium3DTileset.fromUrl("TILESET", {maximumScreenSpaceError: 16});
+    const tileset = await Cesium.Cesium3DTileset.fromUrl("TILESET", {
+      maximumScreenSpaceError: 16, show: false, preloadWhenHidden: true});
     scene.primitives.add(tileset);
     let bs = tileset.boundingSphere;
     if ("CAMERA" !== "") {  // place the camera by another tileset's bounding sphere
@@ -59,7 +73,10 @@ window.splatsStable = () => {
     }
     viewer.camera.viewBoundingSphere(bs, new Cesium.HeadingPitchRange(0.3, -0.6, bs.radius * 2.2));
     viewer.camera.lookAtTransform(Cesium.Matrix4.IDENTITY);
-    tileset.allTilesLoaded.addEventListener(() => { window.state.loaded = true; });
+    tileset.allTilesLoaded.addEventListener(() => {
+      window.state.loaded = true;
+      tileset.show = true;
+    });
     window.state.tileset = tileset;
   } catch (e) { window.state.error = String(e); }
 })();
@@ -99,10 +116,13 @@ def write_page(site: Path, tileset_url: str, camera_url: str = "") -> Path:
 
 
 def render(site: Path, tileset_url: str, png: Path, *, size=(800, 600),
-           timeout_s: float = 180.0, settle_ms: int = 2000, camera_url: str = ""):
-    """Render the tileset in headless Chromium; save a screenshot; return it as an RGB array.
+           timeout_s: float = 180.0, camera_url: str = ""):
+    """Render the tileset in headless Chromium; save a screenshot; return it as an RGB array,
+    a dict of tileset statistics and the page errors.
 
-    The camera looks at the bounding sphere of the tileset (or of `camera_url`'s tileset)."""
+    The camera looks at the bounding sphere of the tileset (or of `camera_url`'s tileset). The
+    screenshot is the one frame in which every selected splat was drawn, sorted for this
+    camera (`info["drawn"]` splats); Cesium draws nothing after it."""
     from playwright.sync_api import sync_playwright
 
     write_page(site, tileset_url, camera_url)
@@ -113,32 +133,18 @@ def render(site: Path, tileset_url: str, png: Path, *, size=(800, 600),
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.goto(f"{base}/index.html")
-            page.wait_for_function("window.state && (window.state.error || window.splatsStable())",
-                                   timeout=timeout_s * 1000, polling=500)
+            page.wait_for_function("window.state && (window.state.error || window.state.done)",
+                                   timeout=timeout_s * 1000, polling=250)
             err = page.evaluate("window.state.error")
             if err:
                 raise RuntimeError(f"Cesium could not load the tileset: {err}")
             png.parent.mkdir(parents=True, exist_ok=True)
-            # splats are sorted by a web worker after loading: wait until the picture settles
-            # (SwiftShader can take seconds a frame: two equal screenshots alone may be one
-            # frame still being drawn, so the tileset must also report every tile loaded and
-            # the splat primitive stable, three times in a row)
-            t_end = time.monotonic() + timeout_s
-            last, calm = -1, 0
-            while True:
-                page.wait_for_timeout(settle_ms)
-                ready = page.evaluate(
-                    "window.splatsStable() && window.state.tileset.tilesLoaded")
-                page.screenshot(path=str(png), timeout=180_000)
-                lit = int((_read_png(png).max(axis=2) > 24).sum())
-                calm = calm + 1 if ready and last > 0 and abs(lit - last) <= 0.01 * last else 0
-                if calm >= 2 or time.monotonic() > t_end:
-                    break
-                last = lit
+            # the GPU process may still be drawing that last frame: the screenshot waits for it
+            page.screenshot(path=str(png), timeout=timeout_s * 1000)
             info = page.evaluate("""() => { const t = window.state.tileset;
                 return {selected: t.statistics.selected,
                         features: t.statistics.numberOfPointsSelected,
-                        gs: t.statistics.numberOfGaussianSplatsSelected || null}; }""")
+                        drawn: window.state.drawn}; }""")
         finally:
             browser.close()
     return _read_png(png), info, errors
