@@ -1,5 +1,5 @@
-"""Tileset/glTF structure (DESIGN.md 'Facts about CesiumJS 1.145'), LOD rules, atomic output,
-PLY layouts and the `gsgeo tiles` command line."""
+"""Tileset/glTF structure (docs/architecture.md, 'CesiumJS 1.145 and 3D Tiles with splats'),
+LOD rules, atomic output, PLY layouts and the `gsgeo tiles` command line."""
 
 from __future__ import annotations
 

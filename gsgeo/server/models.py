@@ -1,4 +1,4 @@
-"""Request bodies of the JSON API (pydantic), in the session-JSON shapes of DESIGN.md.
+"""Request bodies of the JSON API (pydantic), in the session-JSON shapes (README, "Session JSON").
 
 They check types and sizes so a malformed request gets 422 naming the field; the deeper
 checks (zero direction, affine model matrix, enough rays, CRS) happen in gsgeo.session,
@@ -27,7 +27,7 @@ SigmaPx = Annotated[float, Field(ge=SIGMA_PX_MIN, le=SIGMA_PX_MAX, allow_inf_nan
 
 
 class Ray(BaseModel):
-    """One aim, in rendered ECEF (metres); DESIGN.md "Session JSON"."""
+    """One aim, in rendered ECEF (metres); the README's "Session JSON"."""
 
     model_config = ConfigDict(extra="ignore")
     origin: Vec3 = Field(description="camera centre, rendered ECEF, metres")

@@ -26,7 +26,7 @@ SCENE = "box"
 
 
 def enu_to_ecef(enu) -> np.ndarray:
-    """Local ENU coordinates at ORIGIN (metres) -> ECEF (EPSG:4978), by DESIGN.md's rotation."""
+    """Local ENU coordinates at ORIGIN (metres) -> ECEF (EPSG:4978) (docs/architecture.md's rotation)."""
     lat, lon, h = ORIGIN
     o = np.array(pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
                  .transform(lon, lat, h))
