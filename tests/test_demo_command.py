@@ -6,6 +6,7 @@ directory; a point measured exactly on a marker must show no difference to the t
 
 from __future__ import annotations
 
+import re
 import sqlite3
 import subprocess
 import sys
@@ -16,6 +17,7 @@ from servertools import rays_at
 
 from gsgeo.demo import place, scene
 from gsgeo.store import Projects, open_store
+from tests.conftest import REPO
 
 
 def _gsgeo(*args, cwd=None):
@@ -24,12 +26,34 @@ def _gsgeo(*args, cwd=None):
 
 
 @pytest.fixture(scope="module")
-def data(tmp_path_factory):
+def demo_run(tmp_path_factory):
+    """The first `gsgeo demo --no-serve` in a fresh data directory: (DATA, its process)."""
     d = tmp_path_factory.mktemp("demo") / "gsgeo-data"
     r = _gsgeo("demo", "--data", str(d), "--no-serve")
     assert r.returncode == 0, r.stderr
     assert "20 check points" in r.stdout and "?scene=demo&project=demo" in r.stdout
-    return d
+    return d, r
+
+
+@pytest.fixture(scope="module")
+def data(demo_run):
+    return demo_run[0]
+
+
+def test_demo_words_match_the_readme(demo_run):
+    """The demo tells how to measure in the README's words (3-5 views from different
+    directions) and counts in the right number ('1 tile', never '1 tiles')."""
+    from gsgeo.demo.build import counted
+
+    readme = " ".join((REPO / "README.md").read_text(encoding="utf-8").split())
+    views = re.search(r"click a marker in (\d)–(\d) views from different directions", readme)
+    assert views, "the README no longer says how many views"
+    out = demo_run[1].stdout
+    assert f"click a marker in {views[1]}-{views[2]} views from different directions" in out, out
+    tiles = re.search(r"\((\d+) (tiles?)\)", demo_run[1].stderr)
+    assert tiles and (tiles[2] == "tile") == (tiles[1] == "1"), demo_run[1].stderr
+    assert [counted(1, "tile"), counted(2, "tile"), counted(12_000, "splat")] == \
+        ["1 tile", "2 tiles", "12,000 splats"]
 
 
 def test_demo_builds_scene_and_project(data):

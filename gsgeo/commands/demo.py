@@ -8,6 +8,11 @@ from pathlib import Path
 
 from gsgeo.errors import InputError
 
+#: How to measure a marker, in the README's words.
+MEASURE_HINT = ("measure      press M, click a marker in 3-5 views from different directions, "
+                "press Enter and give the point the marker's id (G1-G4, R1, B1-B6, T1-T5, "
+                "S1-S4): the accuracy panel shows dE, dN, dH and the RMSE against the truth")
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -64,11 +69,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"project      '{PROJECT_ID}' in {data.resolve() / 'gsgeo.sqlite'}")
     if args.no_serve:
         print(f"serve it     gsgeo serve --data {data} and open {url}")
+        print(MEASURE_HINT)
         return 0
     print(f"open         {url}")
-    print("measure      press M, click a marker in 2-5 views, Enter; name the point after the "
-          "marker (G1-G4, R1, B1-B6, T1-T5, S1-S4) to see its difference to the truth",
-          flush=True)
+    print(MEASURE_HINT, flush=True)
     from gsgeo.commands import serve
 
     return serve.run(argparse.Namespace(data=str(data), host=args.host, port=args.port, web=None,

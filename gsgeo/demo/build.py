@@ -76,6 +76,13 @@ def is_built(data_dir: str | os.PathLike) -> bool:
     return doc.get("version") == VERSION
 
 
+def counted(n: int | None, noun: str) -> str:
+    """'1 tile', '3 tiles' (English plural by -s); '? tiles' when the count is unknown."""
+    if n is None:
+        return f"? {noun}s"
+    return f"{n:,} {noun}" if n == 1 else f"{n:,} {noun}s"
+
+
 def checkpoints_csv_text(truth: list[place.TruthPoint]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -148,7 +155,7 @@ def build_demo(data_dir: str | os.PathLike, *, force: bool = False,
         "subsets": list(scene.SUBSETS),
     }
     _atomic_write(p["truth"], json.dumps(doc, indent=1))   # written last: marks the build done
-    say(f"scene {p['scene']} ({summary.get('tiles')} tiles) and {len(truth)} check points "
-        f"in {time.monotonic() - t0:.1f} s")
+    say(f"scene {p['scene']} ({counted(summary.get('tiles'), 'tile')}) and {len(truth)} check "
+        f"points in {time.monotonic() - t0:.1f} s")
     return DemoBuild(d, p["ply"], p["scene"], p["csv"], p["truth"], n, True,
                      time.monotonic() - t0)
