@@ -50,6 +50,7 @@ def test_synthetic_scene_renders_as_splats(tmp_path, rng):
     build_tileset(tmp_path / "blobs.ply", site / "ts", Georeference(
         "origin", origin=(40.0, -83.0, 250.0)), max_splats=1000, progress=None)
     img, info, errors = render(site, "ts/tileset.json", ARTIFACTS / "tiles_blobs.png")
+    assert info["drawn"] == n, info
     lit = _lit(img)
     # 1-pixel points would light at most n pixels; splats of 0.4 m light far more
     assert lit.sum() > 25 * n, (lit.sum(), info, errors)
