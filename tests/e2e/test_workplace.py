@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import importlib.util
 import re
-import time
 import warnings
 
 import numpy as np
@@ -19,6 +18,7 @@ import pyproj
 import pytest
 
 from tests.e2e.scene import MARKERS
+from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS
 from tests.e2e.workplace import (
     AIM_JS,
     ARTIFACTS,
@@ -101,29 +101,16 @@ class Page:
             "window.gsgeo.tileset && window.gsgeo.tilesReady && window.gsgeo.tileset.tilesLoaded",
             timeout=90_000)
 
-    def splats_drawn(self) -> float:
-        """Fraction of the viewer's pixels that differ from the empty globe (splats drawn)."""
-        import io
-
-        from PIL import Image
-
-        box = self.page.locator("#cesium").bounding_box()
-        png = self.page.screenshot(clip=box, timeout=90_000)
-        img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
-        globe = np.array([0x3a, 0x40, 0x46])
-        return float((np.abs(img - globe).sum(axis=2) > 40).mean())
-
     def shot(self, name: str, settle_ms: int = 1000, timeout_s: float = 40.0):
-        """Screenshot to artifacts/ once the splats are sorted and drawn (SwiftShader on a busy
-        machine takes seconds after each camera move). Screenshots are for people to look
-        at, not assertions: one that cannot be taken in time is reported and skipped."""
+        """Screenshot to artifacts/ once every selected splat is sorted and drawn (SwiftShader
+        on a busy machine takes seconds after each camera move). Screenshots are for people
+        to look at, not assertions: one that cannot be taken in time is reported and skipped."""
         from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
         self.page.wait_for_timeout(settle_ms)
-        deadline = time.monotonic() + timeout_s
         try:
-            while self.splats_drawn() < 0.25 and time.monotonic() < deadline:
-                self.page.wait_for_timeout(1000)
+            self.page.wait_for_function(f"({ALL_SPLATS_DRAWN_JS})(window.gsgeo.tileset)",
+                                        timeout=timeout_s * 1000, polling=250)
             ARTIFACTS.mkdir(exist_ok=True)
             self.page.screenshot(path=str(ARTIFACTS / f"workplace_{name}.png"), timeout=90_000)
         except PlaywrightTimeout:

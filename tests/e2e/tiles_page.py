@@ -19,6 +19,14 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader",
                  "--enable-unsafe-swiftshader", "--disable-background-networking",
                  "--disable-component-update", "--no-first-run"]
 
+#: JavaScript predicate on a Cesium3DTileset: its Gaussian splat primitive holds one snapshot
+#: of every selected splat, sorted and ready to draw. CesiumJS 1.145 (pinned) has no public
+#: signal for it, so this reads the primitive's snapshot fields (revisit on a Cesium upgrade).
+ALL_SPLATS_DRAWN_JS = """(t) => { const p = t && t.gaussianSplatPrimitive;
+  const n = t ? t.statistics.numberOfPointsSelected : 0;
+  return !!p && t.show && t.tilesLoaded && n > 0 && p._numSplats === n &&
+    !p._pendingSnapshot && !p._needsSnapshotRebuild && !!p._drawCommand; }"""
+
 PAGE = """<!doctype html>
 <html><head><meta charset="utf-8">
 <script src="/cesium/Cesium.js"></script>
@@ -46,12 +54,7 @@ window.state = {loaded: false, done: false, error: null, drawn: 0};
 // waits dozens of frames before it rebuilds (seconds each in SwiftShader). So the tileset
 // loads hidden (preloadWhenHidden), is shown once every tile is in, and the picture is done
 // when the frame just drawn holds one snapshot of all selected splats, sorted for this camera.
-function allSplatsDrawn() {
-  const t = window.state.tileset, p = t && t.gaussianSplatPrimitive;
-  const n = t ? t.statistics.numberOfPointsSelected : 0;
-  return !!p && t.show && t.tilesLoaded && n > 0 && p._numSplats === n &&
-    !p._pendingSnapshot && !p._needsSnapshotRebuild && !!p._drawCommand;
-}
+const allSplatsDrawn = () => (ALL_SPLATS_DRAWN)(window.state.tileset);
 scene.postRender.addEventListener(() => {
   if (window.state.done || !allSplatsDrawn()) return;
   window.state.drawn = window.state.tileset.gaussianSplatPrimitive._numSplats;
@@ -111,7 +114,8 @@ def serve(site: Path):
 
 def write_page(site: Path, tileset_url: str, camera_url: str = "") -> Path:
     p = site / "index.html"
-    p.write_text(PAGE.replace("TILESET", tileset_url).replace("CAMERA", camera_url))
+    p.write_text(PAGE.replace("ALL_SPLATS_DRAWN", ALL_SPLATS_DRAWN_JS)
+                 .replace("TILESET", tileset_url).replace("CAMERA", camera_url))
     return p
 
 
