@@ -135,3 +135,39 @@ def test_busy_port_is_reported_before_building(tmp_path):
         r = _gsgeo("demo", "--data", str(tmp_path / "d"), "--port", str(port))
     assert r.returncode == 2 and "in use" in r.stderr and "--port" in r.stderr
     assert not (tmp_path / "d").exists()   # nothing built
+
+
+def test_demo_off_loopback_prints_the_address_with_its_token(data):
+    """Bound off loopback the API needs a token: the address the demo prints carries the very
+    token the server uses, so opening it works (a bare address would get 401 everywhere)."""
+    import os
+    import time
+
+    import httpx
+    from servertools import free_port
+
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if k != "GSGEO_TOKEN"}
+    proc = subprocess.Popen([sys.executable, "-m", "gsgeo", "demo", "--data", str(data),
+                             "--host", "0.0.0.0", "--port", str(port)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = next((ln for ln in proc.stdout if ln.startswith("open")), "")
+        token = re.search(r"#token=([\w-]+)$", line.strip())
+        assert token, line
+        base = f"http://127.0.0.1:{port}"
+        deadline = time.monotonic() + 30
+        while True:
+            assert proc.poll() is None, proc.stderr.read()
+            try:
+                httpx.get(base + "/api/info", timeout=1.0)
+                break
+            except httpx.HTTPError:
+                assert time.monotonic() < deadline, "the demo's server did not start"
+                time.sleep(0.1)
+        assert httpx.get(base + "/api/projects").status_code == 401
+        r = httpx.get(base + "/api/projects", headers={"Authorization": f"Bearer {token[1]}"})
+        assert r.status_code == 200 and "demo" in r.text
+    finally:
+        proc.terminate()
+        proc.communicate(timeout=10)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -68,12 +69,23 @@ def run(args: argparse.Namespace) -> int:
           "WGS 84 ellipsoidal heights)")
     print(f"project      '{PROJECT_ID}' in {data.resolve() / 'gsgeo.sqlite'}")
     if args.no_serve:
-        print(f"serve it     gsgeo serve --data {data} and open {url}")
+        where = "".join([f" --host {args.host}" if args.host != "127.0.0.1" else "",
+                         f" --port {args.port}" if args.port != 8000 else ""])
+        print(f"serve it     gsgeo serve --data {data}{where} and open {url}")
         print(MEASURE_HINT)
         return 0
+    from gsgeo.commands import serve
+
+    token, generated = serve.resolve_token(args.host)
+    if generated:
+        # off loopback the API needs a token: make the one serve will use now, so that the
+        # address printed here opens the viewer (it keeps the token after the first visit)
+        os.environ["GSGEO_TOKEN"] = token
+        url += f"#token={token}"
+    elif token:
+        url += "  (the first time with #token=<your GSGEO_TOKEN> at its end)"
     print(f"open         {url}")
     print(MEASURE_HINT, flush=True)
-    from gsgeo.commands import serve
 
     return serve.run(argparse.Namespace(data=str(data), host=args.host, port=args.port, web=None,
                                         log_level="warning"))
