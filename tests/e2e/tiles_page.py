@@ -1,7 +1,8 @@
 """A minimal CesiumJS page and loopback HTTP server to render a 3D Tiles splat tileset.
 
 No Cesium ion, no imagery, no globe: the page shows only the tileset on black, so pixels
-that are not black are splats. Used by tests/e2e/test_tiles_render.py and benchmarks.
+that are not black are splats. Used by tests/e2e/test_tiles_render.py; the workplace tests
+take ALL_SPLATS_DRAWN_JS to know when a screenshot shows the whole scene.
 """
 
 from __future__ import annotations
