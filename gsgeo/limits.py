@@ -15,6 +15,9 @@ from gsgeo.errors import InputError
 #: A-priori aiming precision, pixels: from a hundredth of a pixel (finer than any aim) to 100.
 SIGMA_PX_MIN = 0.01
 SIGMA_PX_MAX = 100.0
+#: The solver itself (a library function, also used by simulations with near noise-free aims)
+#: takes sigma_px down to this: its weights 1 / (sigma_px · ifov · range)² stay finite.
+SOLVER_SIGMA_PX_MIN = 1e-12
 #: Angular size of a pixel, radians per pixel: from 1e-7 (a telescope) to 0.1 (5.7 degrees).
 IFOV_MIN = 1e-7
 IFOV_MAX = 0.1
@@ -49,11 +52,12 @@ def _finite(value: Any, where: str, unit: str) -> float:
     return v
 
 
-def sigma_px(value: Any, where: str = "sigma_px") -> float:
-    """The aiming precision in pixels, checked to lie in [SIGMA_PX_MIN, SIGMA_PX_MAX]."""
+def sigma_px(value: Any, where: str = "sigma_px", minimum: float = SIGMA_PX_MIN) -> float:
+    """The aiming precision in pixels, checked to lie in [minimum, SIGMA_PX_MAX]; ``minimum``
+    is SIGMA_PX_MIN at every user-facing edge and SOLVER_SIGMA_PX_MIN in the solver."""
     v = _finite(value, where, "pixels")
-    if not SIGMA_PX_MIN <= v <= SIGMA_PX_MAX:
-        raise InputError(f"{where}: must be between {SIGMA_PX_MIN:g} and {SIGMA_PX_MAX:g} pixels, "
+    if not minimum <= v <= SIGMA_PX_MAX:
+        raise InputError(f"{where}: must be between {minimum:g} and {SIGMA_PX_MAX:g} pixels, "
                          f"got {v:g}")
     return v
 

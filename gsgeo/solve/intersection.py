@@ -155,7 +155,7 @@ def _check_sigma_px(sigma_px) -> float:
         s = float(sigma_px)
     except (TypeError, ValueError, OverflowError):
         raise InputError(f"sigma_px must be a number of pixels, got {str(sigma_px)[:40]}") from None
-    return limits.sigma_px(s)
+    return limits.sigma_px(s, minimum=limits.SOLVER_SIGMA_PX_MIN)
 
 
 def _check_ranges(o: np.ndarray, d: np.ndarray, norm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
