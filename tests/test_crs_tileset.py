@@ -10,8 +10,8 @@ import pytest
 
 from gsgeo.crs.frames import ecef_to_geodetic, enu_rotation, geodetic_to_ecef
 from gsgeo.crs.modelmatrix import column_major
-from gsgeo.crs.tileset import Y_UP_TO_Z_UP, Tileset, read_content
 from gsgeo.errors import InputError
+from gsgeo.tiles.tileset import Y_UP_TO_Z_UP, Tileset, read_content
 
 # From ../shared/data/README.md
 ORIGIN_LON, ORIGIN_LAT = -83.02341, 40.01609

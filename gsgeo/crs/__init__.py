@@ -1,4 +1,4 @@
-"""gsgeo.crs: frames (ECEF <-> ENU), the tileset transform chain, grid output with covariance,
+"""gsgeo.crs: frames (ECEF <-> ENU), grid output with covariance,
 vertical datums and the measurement pipeline. Knows PROJ, never HTTP.
 
 PROJ never uses the network from gsgeo: every module that uses pyproj imports
@@ -20,7 +20,6 @@ _WHERE = {
     "measure_session": "pipeline",
     "disable_network": "resolve", "grid_crs": "resolve", "parse_crs": "resolve",
     "source_crs": "resolve",
-    "Tileset": "tileset",
 }
 
 
@@ -42,7 +41,6 @@ __all__ = [
     "GridPoints",
     "Measurement",
     "MeasurementFailure",
-    "Tileset",
     "analytic_jacobian",
     "disable_network",
     "ecef_to_geodetic",

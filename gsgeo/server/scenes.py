@@ -76,8 +76,8 @@ def scene_info(scene_dir: Path) -> dict[str, Any]:
                             "origin": None, "bounds": None, "splat_count": None,
                             "transform": None, "error": None}
     from gsgeo.crs.frames import ecef_to_geodetic
-    from gsgeo.crs.tileset import Tileset
     from gsgeo.errors import GsgeoError
+    from gsgeo.tiles.tileset import Tileset
 
     try:
         tileset = Tileset(ts)

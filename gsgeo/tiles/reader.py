@@ -1,16 +1,16 @@
 """Reading SPZ 3D Tiles (ours and others') back into splats in ECEF.
 
-Walks tileset.json (following external tilesets), composes tile transforms, CesiumJS's
-Y-up -> Z-up turn of glTF content and the glTF node matrices, decodes every SPZ primitive
-and turns its splats into ECEF (EPSG:4978, metres): centres exactly (float64), rotations and
+Walks tileset.json with :class:`gsgeo.tiles.tileset.Tileset` (external tilesets, tile
+transforms, the gltfUpAxis turn of glTF content), adds the glTF node matrices, decodes every
+SPZ primitive and turns its splats into ECEF (EPSG:4978, metres): centres exactly (float64), rotations and
 SH coefficients by the rotation part, log-scales by the uniform scale of the transform.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
+import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,8 +19,9 @@ import numpy as np
 
 from gsgeo.errors import InputError
 from gsgeo.tiles import spz
-from gsgeo.tiles.gltf import Y_UP_TO_Z_UP, parse_glb
+from gsgeo.tiles.gltf import parse_glb
 from gsgeo.tiles.splats import Splats, matrix_to_quat, quat_multiply, sh_rotation
+from gsgeo.tiles.tileset import Tileset, read_gltf_json
 
 
 @dataclass
@@ -30,13 +31,6 @@ class TileSplats:
     splats: Splats           # in ECEF (or the tile content frame, see iter_tileset)
     to_ecef: np.ndarray      # 4x4 content -> ECEF
     header: dict
-
-
-def _colmajor(m: list) -> np.ndarray:
-    a = np.asarray(m, np.float64)
-    if a.shape != (16,):
-        raise InputError("a tile transform must have 16 numbers")
-    return a.reshape(4, 4).T
 
 
 def transform_splats(s: Splats, m: np.ndarray) -> Splats:
@@ -58,45 +52,24 @@ def transform_splats(s: Splats, m: np.ndarray) -> Splats:
 
 
 def iter_tileset(path: str | os.PathLike, *, frame: str = "ecef") -> Iterator[TileSplats]:
-    """Every SPZ tile of a tileset, its splats in ECEF (frame='ecef') or as stored ('content')."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / "tileset.json"
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON ({exc.msg})") from None
-    if "root" not in doc:
-        raise InputError(f"{path}: not a 3D Tiles tileset (no 'root')")
-    yield from _walk(doc["root"], path.parent, np.eye(4), 0, frame)
+    """Every SPZ tile of a tileset, its splats in ECEF (frame='ecef') or as stored ('content').
 
-
-def _walk(tile: dict, base: Path, parent: np.ndarray, level: int, frame: str):
-    m = parent @ _colmajor(tile["transform"]) if "transform" in tile else parent
-    contents = ([tile["content"]] if "content" in tile else []) + tile.get("contents", [])
-    for c in contents:
-        uri = c.get("uri") or c.get("url")
-        if not uri:
-            continue
-        p = base / uri
-        if p.suffix.lower() == ".json":
-            doc = json.loads(p.read_text(encoding="utf-8"))
-            yield from _walk(doc["root"], p.parent, m, level, frame)
-            continue
-        try:
-            data = p.read_bytes()
-        except OSError as exc:
-            raise InputError(f"{p}: cannot read tile content ({exc.strerror})") from None
-        for blob, node_m in parse_glb(data, str(p)):
-            s, header = spz.decode(blob)
-            to_ecef = m @ Y_UP_TO_Z_UP @ node_m
-            if frame == "ecef":
-                s = transform_splats(s, to_ecef)
-            yield TileSplats(uri, level, s, to_ecef, header)
-    for child in tile.get("children", []):
-        yield from _walk(child, base, m, level + 1, frame)
+    The tileset is walked by :class:`gsgeo.tiles.tileset.Tileset` (external tilesets, tile
+    transforms, gltfUpAxis); ``to_ecef`` is its content-to-ECEF matrix of each primitive.
+    """
+    ts = Tileset(path)
+    for tile in ts.tiles():
+        for uri, p in zip(tile.content_uris, tile.content_paths, strict=True):
+            try:
+                data = p.read_bytes()
+            except OSError as exc:
+                raise InputError(f"{p}: cannot read tile content ({exc.strerror})") from None
+            for blob, node_m in parse_glb(data, str(p)):
+                s, header = spz.decode(blob)
+                to_ecef = ts.node_to_ecef(tile, node_m)
+                if frame == "ecef":
+                    s = transform_splats(s, to_ecef)
+                yield TileSplats(uri, tile.level, s, to_ecef, header)
 
 
 def read_tileset(path: str | os.PathLike) -> Splats:
@@ -109,31 +82,21 @@ def read_tileset(path: str | os.PathLike) -> Splats:
 
 def splat_count(path: str | os.PathLike) -> int:
     """Number of splats in a tileset, from the glTF accessor counts (no decoding)."""
-    import struct
-    path = Path(path)
-    if path.is_dir():
-        path = path / "tileset.json"
-    doc = json.loads(path.read_text(encoding="utf-8"))
     total = 0
-
-    def walk(tile: dict, base: Path) -> None:
-        nonlocal total
-        contents = ([tile["content"]] if "content" in tile else []) + tile.get("contents", [])
-        for c in contents:
-            p = base / (c.get("uri") or c.get("url"))
-            if p.suffix.lower() == ".json":
-                walk(json.loads(p.read_text(encoding="utf-8"))["root"], p.parent)
-                continue
-            with open(p, "rb") as f:
-                head = f.read(20)
-                jlen = struct.unpack("<I", head[12:16])[0]
-                gltf = json.loads(f.read(jlen))
+    for tile in Tileset(path).tiles():
+        for p in tile.content_paths:
+            gltf, _ = read_gltf_json(_json_head(p), str(p))
             for mesh in gltf.get("meshes", []):
                 for prim in mesh["primitives"]:
                     if "KHR_gaussian_splatting" in prim.get("extensions", {}):
                         total += int(gltf["accessors"][prim["attributes"]["POSITION"]]["count"])
-        for ch in tile.get("children", []):
-            walk(ch, base)
-
-    walk(doc["root"], path.parent)
     return total
+
+
+def _json_head(p: Path) -> bytes:
+    """The bytes of a GLB up to the end of its JSON chunk (the whole file otherwise)."""
+    with open(p, "rb") as f:
+        head = f.read(20)
+        if head[:4] == b"glTF" and len(head) == 20:
+            return head + f.read(struct.unpack("<I", head[12:16])[0])
+        return head + f.read()

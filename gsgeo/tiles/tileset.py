@@ -1,20 +1,25 @@
-"""The 3D Tiles transform chain: tileset-local coordinates <-> ECEF.
+"""The one 3D Tiles reader: walks a tileset.json (following external tilesets) and gives every
+tile's computed transform and content, the transform chain from content to ECEF.
 
 A glTF position p of a tile's content lands in ECEF (before the viewer's modelMatrix) at
 
-    tile computed transform x [RTC_CENTER translation] x Y_UP_TO_Z_UP x node matrices x p
+    tile computed transform x [RTC_CENTER translation] x up-axis turn x node matrices x p
 
 - tile computed transform: the product of the ``transform`` of the root and of every tile on
-  the path to the tile (16 numbers, column-major; identity when absent);
+  the path to the tile (16 numbers, column-major; identity when absent), across external
+  tilesets (a content whose uri is a .json tileset: its root becomes a child of the tile);
 - ``RTC_CENTER`` (b3dm feature table, 3D Tiles 1.0) or the glTF ``CESIUM_RTC`` extension:
   a translation applied after the glTF's own up-axis conversion;
-- Y_UP_TO_Z_UP: glTF is y-up, 3D Tiles z-up; CesiumJS rotates +90 degrees about x,
-  (x, y, z) -> (x, -z, y), unless a 1.0 tileset declares ``asset.gltfUpAxis`` "Z";
+- up-axis turn: glTF is y-up, 3D Tiles z-up; CesiumJS rotates +90 degrees about x,
+  (x, y, z) -> (x, -z, y), unless the tileset declares ``asset.gltfUpAxis`` "Z" (or "X");
 - node matrices: glTF ``matrix`` (column-major) or TRS, from the scene's root node down.
 
+The splat reader (:mod:`gsgeo.tiles.reader`) and the server's scene listing use this module.
 The viewer's modelMatrix M (recorded with each ray) sits in front of all of this:
-rendered = M x georeferenced (gsgeo.crs.modelmatrix). Points transform with the whole
-affine matrix, directions with its linear part.
+rendered = M x georeferenced (:mod:`gsgeo.crs.modelmatrix`). Points transform with the whole
+affine matrix, directions with its linear part. ECEF is WGS 84 (EPSG:4978), metres; a tileset
+is WGS 84 by definition, so geodetic coordinates use the closed-form ellipsoid formulas and
+reading a tileset does not load PROJ.
 """
 
 from __future__ import annotations
@@ -26,25 +31,43 @@ from pathlib import Path
 
 import numpy as np
 
-from gsgeo.crs.frames import ecef_to_geodetic
+from gsgeo.crs.ellipsoid import ecef_to_geodetic, geodetic_to_ecef
 from gsgeo.crs.modelmatrix import apply_directions, apply_points, invert_affine, matrix4
 from gsgeo.errors import InputError
+from gsgeo.tiles.gltf import Y_UP_TO_Z_UP
 
-#: CesiumJS Axis.Y_UP_TO_Z_UP: rotation +90 degrees about x.
-Y_UP_TO_Z_UP = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
 #: CesiumJS Axis.X_UP_TO_Z_UP: rotation -90 degrees about y.
 X_UP_TO_Z_UP = np.array([[0, 0, -1.0, 0], [0, 1.0, 0, 0], [1.0, 0, 0, 0], [0, 0, 0, 1.0]])
+#: External tilesets nested deeper than this are refused (a tileset that refers to itself).
+MAX_NESTING = 32
+
+__all__ = ["MAX_NESTING", "X_UP_TO_Z_UP", "Y_UP_TO_Z_UP", "GltfContent", "Tile", "Tileset",
+           "read_content", "read_gltf_json", "up_axis_turn"]
+
+
+def up_axis_turn(asset: dict) -> np.ndarray:
+    """The 4x4 turn of glTF content into the tile's z-up frame for a tileset's ``asset``."""
+    up = str(asset.get("gltfUpAxis", "Y")).upper()
+    return {"Y": Y_UP_TO_Z_UP, "X": X_UP_TO_Z_UP, "Z": np.eye(4)}.get(up, Y_UP_TO_Z_UP)
 
 
 @dataclass
 class Tile:
-    """One tile: its computed transform (tileset-local -> ECEF) and content."""
+    """One tile: its computed transform (tile frame -> ECEF), contents and children."""
 
     path: str  # e.g. "root/children[0]"
     transform: np.ndarray  # (4, 4) computed transform
     bounding_volume: dict
-    content_uri: str | None
+    content_uri: str | None  # the first non-tileset content, relative to `base`
     children: list[Tile] = field(default_factory=list)
+    level: int = 0  # depth in the tile tree (an external tileset's root keeps its parent's)
+    base: Path = Path(".")  # directory the content uris are relative to
+    content_uris: list[str] = field(default_factory=list)  # every non-tileset content
+    gltf_up: np.ndarray | None = None  # up-axis turn of an external tileset; None: the main one
+
+    @property
+    def content_paths(self) -> list[Path]:
+        return [self.base / u for u in self.content_uris]
 
 
 @dataclass
@@ -160,39 +183,50 @@ def read_content(path: str | Path) -> GltfContent:
 
 
 class Tileset:
-    """A tileset.json with every tile's computed transform (3D Tiles 1.0 and 1.1)."""
+    """A tileset.json with every tile's computed transform (3D Tiles 1.0 and 1.1), external
+    tilesets followed."""
 
     def __init__(self, path: str | Path) -> None:
         p = Path(path)
         if p.is_dir():
             p = p / "tileset.json"
-        try:
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise InputError(f"{p}: no such tileset") from None
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise InputError(f"{p}: not a readable tileset.json ({exc})") from None
-        if not isinstance(doc, dict) or "root" not in doc:
-            raise InputError(f"{p}: not a 3D Tiles tileset (no 'root')")
+        doc = _read_tileset_json(p)
         self.path = p
         self.doc = doc
         asset = doc.get("asset", {})
         self.version = str(asset.get("version", ""))
-        up = str(asset.get("gltfUpAxis", "Y")).upper()
-        self.gltf_up = {"Y": Y_UP_TO_Z_UP, "X": X_UP_TO_Z_UP, "Z": np.eye(4)}.get(up, Y_UP_TO_Z_UP)
-        self.root = self._tile(doc["root"], np.eye(4), "root")
+        self.gltf_up = up_axis_turn(asset)
+        self.root = self._tile(doc["root"], np.eye(4), "root", 0, p.parent, None, (p.resolve(),))
 
-    def _tile(self, t: dict, parent: np.ndarray, where: str) -> Tile:
+    def _tile(self, t: dict, parent: np.ndarray, where: str, level: int, base: Path,
+              up: np.ndarray | None, chain: tuple[Path, ...]) -> Tile:
+        if not isinstance(t, dict):
+            raise InputError(f"{where}: a tile must be a JSON object")
         m = parent @ matrix4(t["transform"]) if "transform" in t else parent
         # 3D Tiles 1.1 allows several "contents"; positions share the tile's transform.
-        content = t.get("content") or (t.get("contents") or [{}])[0] or {}
-        uri = content.get("uri") or content.get("url")
-        tile = Tile(where, m, t.get("boundingVolume", {}), uri)
-        tile.children = [self._tile(c, m, f"{where}/children[{i}]")
-                         for i, c in enumerate(t.get("children") or [])]
+        contents = ([t["content"]] if t.get("content") else []) + list(t.get("contents") or [])
+        uris = [c.get("uri") or c.get("url") for c in contents if isinstance(c, dict)]
+        uris = [u for u in uris if u]
+        own = [u for u in uris if not u.lower().split("?")[0].endswith(".json")]
+        tile = Tile(where, m, t.get("boundingVolume", {}), own[0] if own else None,
+                    level=level, base=base, content_uris=own, gltf_up=up)
+        for u in uris:
+            if u in own:
+                continue
+            ext = base / u
+            if ext.resolve() in chain or len(chain) >= MAX_NESTING:
+                raise InputError(f"{ext}: external tilesets refer to each other in a loop")
+            doc = _read_tileset_json(ext)
+            tile.children.append(self._tile(doc["root"], m, f"{where}/{u}", level, ext.parent,
+                                            up_axis_turn(doc.get("asset", {})),
+                                            chain + (ext.resolve(),)))
+        for i, c in enumerate(t.get("children") or []):
+            tile.children.append(self._tile(c, m, f"{where}/children[{i}]", level + 1, base, up,
+                                            chain))
         return tile
 
     def tiles(self) -> list[Tile]:
+        """Every tile, depth first in document order (external tilesets before children)."""
         out, stack = [], [self.root]
         while stack:
             t = stack.pop()
@@ -218,26 +252,36 @@ class Tileset:
     def directions_from_ecef(self, d_ecef, tile: Tile | None = None) -> np.ndarray:
         return apply_directions(invert_affine((tile or self.root).transform), d_ecef)
 
+    def up_turn(self, tile: Tile) -> np.ndarray:
+        """The up-axis turn of a tile's glTF content (its own tileset's gltfUpAxis)."""
+        return self.gltf_up if tile.gltf_up is None else tile.gltf_up
+
+    def node_to_ecef(self, tile: Tile, node_matrix: np.ndarray,
+                     rtc_center: np.ndarray | None = None) -> np.ndarray:
+        """glTF node-frame position -> georeferenced ECEF (4, 4), given the node chain."""
+        rtc = np.eye(4)
+        if rtc_center is not None:
+            rtc[:3, 3] = rtc_center
+        return tile.transform @ rtc @ self.up_turn(tile) @ node_matrix
+
     def content_matrix(self, tile: Tile, content: GltfContent) -> np.ndarray:
         """glTF node-frame position -> georeferenced ECEF (4, 4) for a tile's content."""
-        rtc = np.eye(4)
-        if content.rtc_center is not None:
-            rtc[:3, 3] = content.rtc_center
-        return tile.transform @ rtc @ self.gltf_up @ content.node_matrix
+        return self.node_to_ecef(tile, content.node_matrix, content.rtc_center)
 
     def content_bounds_ecef(self) -> np.ndarray:
         """ECEF corners (K * 8, 3) of every content's POSITION min/max box."""
         corners = []
         for t in self.tiles():
-            if not t.content_uri or not t.content_uri.lower().endswith((".glb", ".gltf", ".b3dm")):
-                continue
-            c = read_content(self.path.parent / t.content_uri)
-            if c.position_min is None:
-                continue
-            lo, hi = c.position_min, c.position_max
-            box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                            for z in (lo[2], hi[2])])
-            corners.append(apply_points(self.content_matrix(t, c), box))
+            for path in t.content_paths:
+                if not path.name.lower().endswith((".glb", ".gltf", ".b3dm")):
+                    continue
+                c = read_content(path)
+                if c.position_min is None:
+                    continue
+                lo, hi = c.position_min, c.position_max
+                box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                for z in (lo[2], hi[2])])
+                corners.append(apply_points(self.content_matrix(t, c), box))
         if not corners:
             raise InputError(f"{self.path}: no glTF content with POSITION bounds")
         return np.concatenate(corners)
@@ -258,8 +302,7 @@ class Tileset:
                               for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
             return apply_points(t.transform, local)
         if "region" in bv:
-            from gsgeo.crs.frames import geodetic_to_ecef
-
+            # radians west, south, east, north and WGS 84 heights (m), by definition
             w, s, e, n, h0, h1 = (float(v) for v in bv["region"])
             lon = np.degrees([w, e]); lat = np.degrees([s, n])  # noqa: E702
             pts = [(lo, la, h) for lo in lon for la in lat for h in (h0, h1)]
@@ -267,8 +310,20 @@ class Tileset:
         raise InputError(f"{t.path}: bounding volume has no box, sphere or region")
 
     def geodetic_bounds(self, corners_ecef: np.ndarray) -> dict:
-        """Longitude, latitude (degrees) and WGS 84 height ranges of ECEF corners."""
+        """WGS 84 longitude, latitude (degrees) and ellipsoidal height (m) ranges of ECEF corners."""
         lon, lat, h = ecef_to_geodetic(corners_ecef)
         return {"lon": (float(lon.min()), float(lon.max())),
                 "lat": (float(lat.min()), float(lat.max())),
                 "h": (float(h.min()), float(h.max()))}
+
+
+def _read_tileset_json(p: Path) -> dict:
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{p}: no such tileset") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{p}: not a readable tileset.json ({exc})") from None
+    if not isinstance(doc, dict) or "root" not in doc:
+        raise InputError(f"{p}: not a 3D Tiles tileset (no 'root')")
+    return doc
