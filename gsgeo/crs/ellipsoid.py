@@ -19,7 +19,11 @@ WGS84_F = 1.0 / 298.257223563
 
 
 def enu_rotation(lon_deg, lat_deg) -> np.ndarray:
-    """Rotation(s) ECEF -> ENU, shape (..., 3, 3), rows east, north, up."""
+    """Rotation(s) ECEF -> ENU at geodetic longitude, latitude in degrees (that order, as
+    everywhere in gsgeo), shape (..., 3, 3), rows east, north, up: v_enu = R v_ecef.
+
+    The one ENU rotation of gsgeo (:mod:`gsgeo.crs.frames` and :mod:`gsgeo.tiles` use it).
+    """
     lam = np.radians(np.asarray(lon_deg, dtype=np.float64))
     phi = np.radians(np.asarray(lat_deg, dtype=np.float64))
     sl, cl, sp, cp = np.sin(lam), np.cos(lam), np.sin(phi), np.cos(phi)

@@ -34,8 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gsgeo.crs import ellipsoid
-from gsgeo.crs.ellipsoid import ecef_to_geodetic, geodetic_to_ecef
+from gsgeo.crs.ellipsoid import ecef_to_geodetic, enu_rotation, geodetic_to_ecef
 from gsgeo.errors import CRSError, InputError
 from gsgeo.tiles.splats import Splats, matrix_to_quat, quat_multiply, rotation_angle, sh_rotation
 
@@ -55,11 +54,6 @@ AXES = {
 SH_ROTATION_MIN_ANGLE = 1e-4
 
 
-def enu_rotation(lat_deg, lon_deg) -> np.ndarray:
-    """Rotation (…, 3, 3) whose rows are east, north, up at (lat, lon): v_enu = R v_ecef."""
-    return ellipsoid.enu_rotation(lon_deg, lat_deg)
-
-
 def rot_z(angle_deg: float | np.ndarray) -> np.ndarray:
     """Counter-clockwise rotation about z by angle (degrees), (…, 3, 3)."""
     a = np.radians(angle_deg)
@@ -67,14 +61,6 @@ def rot_z(angle_deg: float | np.ndarray) -> np.ndarray:
     z, o = np.zeros_like(c), np.ones_like(c)
     return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1),
                      np.stack([z, z, o], -1)], axis=-2)
-
-
-def enu_to_ecef_matrix(lat: float, lon: float, h: float) -> np.ndarray:
-    """4x4 matrix taking ENU coordinates at (lat, lon, h) to ECEF (row-major numpy)."""
-    m = np.eye(4)
-    m[:3, :3] = enu_rotation(lat, lon).T
-    m[:3, 3] = geodetic_to_ecef(lon, lat, h)
-    return m
 
 
 def load_matrix(path: str | os.PathLike) -> np.ndarray:
@@ -198,7 +184,7 @@ class Georeference:
             r, s = _similarity(m[:3, :3] @ ax.T, "--transform")
             return m[:3, :3] @ ax.T, m[:3, 3], s
         lat, lon, h = self.origin
-        r = enu_rotation(lat, lon).T @ rot_z(-self.heading) @ ax
+        r = enu_rotation(lon, lat).T @ rot_z(-self.heading) @ ax
         t = geodetic_to_ecef(lon, lat, h)
         return r, t, 1.0
 
@@ -222,7 +208,7 @@ class Placement:
         self.centre_ecef = np.asarray(centre_ecef, np.float64)
         lon, lat, h = ecef_to_geodetic(self.centre_ecef)
         self.centre_lonlath = (float(lon), float(lat), float(h))
-        self.r_root = enu_rotation(float(lat), float(lon))   # ECEF -> root ENU
+        self.r_root = enu_rotation(float(lon), float(lat))   # ECEF -> root ENU
         self.operation = ""
         self.operation_accuracy_m: float | None = None
         self._sh_turns: dict[tuple[int, bytes], np.ndarray] = {}

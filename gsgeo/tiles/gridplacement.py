@@ -16,9 +16,10 @@ from pyproj.exceptions import CRSError as PyprojCRSError
 from pyproj.exceptions import ProjError
 
 from gsgeo.crs import resolve as _resolve  # noqa: F401  (PROJ off the network before any use)
+from gsgeo.crs.ellipsoid import enu_rotation
 from gsgeo.crs.transformers import accuracy_m, choose
 from gsgeo.errors import CRSError, DatumError
-from gsgeo.tiles.georef import AXES, Georeference, Placement, enu_rotation, rot_z
+from gsgeo.tiles.georef import AXES, Georeference, Placement, rot_z
 from gsgeo.tiles.splats import Splats
 
 
@@ -96,7 +97,7 @@ class GridPlacement(Placement):
         _, lon_c, lat_c = self._ecef(c_in[None])
         conv_c = float(np.asarray(self.proj.get_factors(lon_c, lat_c, errcheck=False)
                                   .meridian_convergence, float)[0])
-        self.sh_rot = self.r_root @ enu_rotation(lat_c[0], lon_c[0]).T @ rot_z(-conv_c) @ self.ax
+        self.sh_rot = self.r_root @ enu_rotation(lon_c[0], lat_c[0]).T @ rot_z(-conv_c) @ self.ax
 
     def _ecef(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Input (axes already Z-up) -> ECEF (N, 3), and geodetic lon, lat on the grid's datum."""
@@ -129,7 +130,7 @@ class GridPlacement(Placement):
         conv = np.asarray(f.meridian_convergence, float)
         k = np.sqrt(np.asarray(f.areal_scale, float))
         # grid axes at the splat -> local ENU (turn by -convergence) -> ECEF -> root ENU
-        rot = self.r_root @ np.swapaxes(enu_rotation(lat, lon), -1, -2) @ rot_z(-conv) @ self.ax
+        rot = self.r_root @ np.swapaxes(enu_rotation(lon, lat), -1, -2) @ rot_z(-conv) @ self.ax
         return self._turn(s, rot, -np.log(k), pos, self.sh_rot)
 
     def to_ecef(self, p: np.ndarray) -> np.ndarray:
