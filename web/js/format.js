@@ -29,6 +29,9 @@ export function escapeHtml(s) {
   }[c]));
 }
 
+/** The first element matching a CSS selector. */
+export const $ = (sel) => document.querySelector(sel);
+
 /** Element helper: h("td", {class: "num"}, "1.0") */
 export function h(tag, attrs = {}, ...children) {
   const el = document.createElement(tag);

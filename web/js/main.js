@@ -4,11 +4,10 @@
 import { api, download, ApiError } from "./api.js";
 import { Drawer, COLORS, SCALE_95_3D, cart } from "./draw.js";
 import { applyPoint, applyDirection, norm, sub, IDENTITY16 } from "./linalg.js";
-import { fixed, mm, length, area, h } from "./format.js";
-import { captureRay } from "./rays.js";
+import { $, fixed, mm, length, area, h } from "./format.js";
+import { TOOLS, activeTool, activate, handlerOf, release, toolByShortcut } from "./tools/index.js";
 
 const Cesium = window.Cesium;
-const $ = (sel) => document.querySelector(sel);
 
 // ---------------------------------------------------------------------------------------
 // state
@@ -24,8 +23,8 @@ const state = {
   polygons: [],
   checkPoints: 0,
   selected: null, // point id
-  mode: "idle", // idle | measure | line | polygon
-  measure: null, // {rays, excluded:Set, editing, pointId, solution, error, seq, busy}
+  mode: "idle", // the active tool's id (tools/index.js): idle | measure | line | polygon
+  measure: null, // the measure tool's point: {rays, excluded:Set, editing, pointId, solution, error, seq}
   feature: null, // {kind, points: []}
   conf: "95",
 };
@@ -84,30 +83,11 @@ function fail(exc) {
   message(exc instanceof ApiError || exc instanceof Error ? exc.message : String(exc), true);
 }
 
-function nextPointId() {
-  const used = new Set(state.points.map((p) => p.id));
-  let n = 1;
-  for (const p of state.points) {
-    const m = /^P(\d+)$/.exec(p.id);
-    if (m) n = Math.max(n, Number(m[1]) + 1);
-  }
-  while (used.has(`P${n}`)) n++;
-  return `P${n}`;
-}
-
 function updateStatus() {
   const el = $("#status");
   el.className = "";
   let text;
-  if (state.mode === "measure") {
-    const m = state.measure;
-    const n = m.rays.length;
-    const name = m.editing ? `point ${m.editing}` : m.pointId;
-    el.className = "measuring";
-    if (n === 0) text = `Measuring ${name}: click the feature to add ray 1. Esc cancels.`;
-    else if (n === 1) text = `Ray 1 of ${name} added. Move the camera to another viewpoint (30° or more away) and click the same feature for ray 2. Backspace removes ray 1, Esc cancels.`;
-    else text = `${n} rays on ${name}. Click the feature from another viewpoint for ray ${n + 1}, or press Enter to store it. Backspace removes ray ${n}, Esc cancels.`;
-  } else if (state.mode === "line" || state.mode === "polygon") {
+  if (state.mode === "line" || state.mode === "polygon") {
     const f = state.feature;
     const need = f.kind === "line" ? 2 : 3;
     el.className = "picking";
@@ -115,12 +95,10 @@ function updateStatus() {
       + `${f.points.length ? ": " + f.points.join(" → ") : ""}). `
       + (f.points.length >= need ? "Enter stores it. " : `Needs ${need} points. `)
       + "Backspace removes the last, Esc cancels.";
-  } else if (!state.sceneName) {
-    text = "No scene loaded. Make one with `gsgeo tiles INPUT.ply -o DATA/scenes/NAME --origin LAT,LON,H` and pick it above.";
-  } else if (!state.project) {
-    text = "Create or open a project (top bar) to store points. M measures a point, ? shows help.";
   } else {
-    text = "M (or Measure point) starts a point; a click on a point marker selects it. L line, P polygon, ? help. Drag moves, wheel zooms, Ctrl + drag tilts.";
+    const status = activeTool(state).status(ctx);
+    text = status.text;
+    el.className = status.className;
   }
   el.textContent = text;
 }
@@ -349,207 +327,35 @@ async function submitProject(ev) {
 }
 
 // ---------------------------------------------------------------------------------------
-// measuring
+// tools
 
-function startMeasure(editPoint = null) {
-  if (state.mode === "line" || state.mode === "polygon") cancelFeature();
-  if (state.mode === "measure") return;
-  state.mode = "measure";
-  state.measure = {
-    rays: editPoint ? editPoint.rays.map((r) => ({ ...r })) : [],
-    excluded: new Set(editPoint ? editPoint.excluded : []),
-    editing: editPoint ? editPoint.id : null,
-    pointId: editPoint ? editPoint.id : nextPointId(),
-    solution: null, error: null, seq: 0,
-  };
-  $("#pt-id").value = state.measure.pointId;
-  $("#pt-id").dataset.auto = "1"; // the server picks the next free id unless the user types one
-  $("#pt-id").disabled = Boolean(editPoint);
-  $("#pt-code").value = editPoint ? editPoint.code : "";
-  $("#pt-desc").value = editPoint ? editPoint.description : "";
-  $("#btn-measure").classList.add("active");
-  $("#measure-panel").hidden = false;
-  $("#measure-title").textContent = editPoint ? `Adding rays to ${editPoint.id}` : `New point ${state.measure.pointId}`;
-  if (editPoint) solveLive(); else renderMeasure();
-  updateStatus();
-}
-
-function endMeasure() {
-  state.mode = "idle";
-  state.measure = null;
-  $("#btn-measure").classList.remove("active");
-  $("#measure-panel").hidden = true;
-  draw.clear("current");
-  updateStatus();
-}
-
-function addRay(windowPosition) {
-  const ray = captureRay(viewer, windowPosition, modelMatrix());
-  if (!ray) { message("This click gives no ray (is the camera perspective?).", true); return; }
-  state.measure.rays.push(ray);
-  solveLive();
-  updateStatus();
-}
-
-function removeLastRay() {
-  const m = state.measure;
-  if (!m.rays.length) { message("There is no ray to remove; Esc cancels the point."); return; }
-  m.rays.pop();
-  m.excluded.delete(m.rays.length);
-  solveLive();
-  updateStatus();
-}
-
-function settings() {
+function solveSettings() {
   const p = state.project;
   return p ? { crs: p.crs, vertical: p.vertical, geoid: p.geoid, source_crs: p.source_crs, sigma_px: p.sigma_px }
     : { crs: null, vertical: null, geoid: null, source_crs: "EPSG:4978", sigma_px: 1.0 };
 }
 
-async function solveLive() {
-  const m = state.measure;
-  const seq = ++m.seq;
-  m.solution = null;
-  m.error = null;
-  const active = m.rays.length - [...m.excluded].filter((i) => i < m.rays.length).length;
-  if (active < 2) { renderMeasure(); return; }
-  renderMeasure(true);
-  try {
-    const res = await api("POST", "/intersect", {
-      rays: m.rays, exclude: [...m.excluded].filter((i) => i < m.rays.length),
-      id: m.pointId, ...settings(),
-    });
-    if (state.measure !== m || seq !== m.seq) return;
-    m.solution = res;
-  } catch (exc) {
-    if (state.measure !== m || seq !== m.seq) return;
-    m.error = exc.message;
-  }
-  renderMeasure();
-}
-
-async function finishMeasure() {
-  const m = state.measure;
-  if (!state.project) { message("Create or open a project first (top bar), then press Enter again.", true); return; }
-  if (m.rays.length < 2) { message(`A point needs at least 2 rays; ${m.pointId} has ${m.rays.length}.`, true); return; }
-  const code = $("#pt-code").value.trim();
-  const description = $("#pt-desc").value.trim();
-  const pid = encodeURIComponent(state.project.id);
-  const excluded = [...m.excluded].filter((i) => i < m.rays.length).sort((a, b) => a - b);
-  try {
-    let pt;
-    if (m.editing) {
-      const url = `/projects/${pid}/points/${encodeURIComponent(m.editing)}`;
-      pt = await api("PATCH", url, { rays: m.rays, excluded, code, description });
-    } else {
-      const id = ($("#pt-id").dataset.auto !== "1" && $("#pt-id").value.trim()) || undefined;
-      pt = await api("POST", `/projects/${pid}/points`, { id, code, description, rays: m.rays, excluded });
-    }
-    state.points = [...state.points.filter((q) => q.id !== pt.id), pt];
-    endMeasure();
-    await refreshProjectData();
-    selectPoint(pt.id, false);
-    const r = pt.record || {};
-    message(pt.status === "solved"
-      ? `Stored ${pt.id}: ${r.crs ? `E ${fixed(r.easting)} N ${fixed(r.northing)} H ${fixed(r.height)}` : `lon ${fixed(r.lon, 8)} lat ${fixed(r.lat, 8)} h ${fixed(r.h_wgs84)}`}`
-      : `Stored ${pt.id}, but it could not be solved: ${pt.error}`, pt.status !== "solved");
-  } catch (exc) {
-    fail(exc);
-  }
-}
-
-function toggleExcludeLive(i) {
-  const m = state.measure;
-  if (m.excluded.has(i)) m.excluded.delete(i); else m.excluded.add(i);
-  solveLive();
-}
-
 function confScale() { return state.conf === "95" ? SCALE_95_3D : 1; }
 
-function ellipsoidNote(radii) {
-  const what = state.conf === "95"
-    ? "95 % confidence ellipsoid (3-D: 2.7955 σ on each principal axis)"
-    : "1σ ellipsoid (holds only 19.9 % of the probability in 3-D; 95 % is 2.7955× larger)";
-  if (!radii || !radii.every(Number.isFinite)) return `Drawn: ${what}.`;
-  return `Drawn at true size: ${what}; semi-axes ${radii.map((r) => mm(r)).join(" × ")} mm.`;
-}
+/** What the tools (tools/*.js) may use of the workplace. */
+const ctx = {
+  state, viewer, draw, message, fail, modelMatrix, solveSettings, confScale,
+  pointById: (id) => pointById(id),
+  nearestPoint: (pos, tol) => nearestPoint(pos, tol),
+  selectPoint: (id, fly) => selectPoint(id, fly),
+  updateStatus: () => updateStatus(),
+  /** The active tool is done: back to the default tool. */
+  done: () => release(ctx),
+  /** The server's answer to storing point `pt` (formerly `oldId`) goes into the state. */
+  pointStored: async (pt) => {
+    state.points = [...state.points.filter((q) => q.id !== pt.id), pt];
+    await refreshProjectData();
+  },
+};
 
-function solutionText(res) {
-  const lines = [];
-  if (res.crs) {
-    lines.push(`E ${fixed(res.easting)}  N ${fixed(res.northing)}  H ${fixed(res.height)} m`);
-    lines.push(`   ${res.crs}${res.vertical_datum ? " + " + res.vertical_datum : ""} (${res.height_type || "h"})`);
-    lines.push(`σ E/N/H ${mm(res.sigma_e)} / ${mm(res.sigma_n)} / ${mm(res.sigma_h)} mm (1σ)`);
-  }
-  lines.push(`lon ${fixed(res.lon, 8)}  lat ${fixed(res.lat, 8)}  h ${fixed(res.h_wgs84)} m (WGS 84)`);
-  lines.push(`σ0 ${fixed(res.sigma0, 2)}   rays ${res.n_rays}   max angle ${fixed(res.max_angle_deg, 1)}°   rms ${mm(res.rms_m)} mm`);
-  return lines.join("\n");
-}
-
-function renderMeasure(busy = false) {
-  const m = state.measure;
-  if (!m) return;
-  const res = m.solution;
-  const tbody = $("#ray-table tbody");
-  tbody.replaceChildren(...m.rays.map((ray, i) => {
-    const rr = res && res.rays ? res.rays[i] : null;
-    const excluded = m.excluded.has(i);
-    const outlier = rr && rr.outlier;
-    return h("tr", { class: excluded ? "excluded" : (outlier ? "outlier" : "") },
-      h("td", {}, `${i + 1}${outlier ? " ⚑ outlier" : ""}`),
-      h("td", { class: "num" }, rr ? fixed(rr.residual_px, 2) : "—"),
-      h("td", { class: "num" }, rr ? mm(rr.residual_m) : "—"),
-      h("td", {}, h("button", { onclick: () => toggleExcludeLive(i), title: excluded ? "use this ray again" : "leave this ray out of the solution" }, excluded ? "restore" : "exclude")));
-  }));
-  const live = $("#live-solution");
-  live.classList.remove("error");
-  if (m.error) {
-    live.textContent = m.error;
-    live.classList.add("error");
-  } else if (res) {
-    live.textContent = solutionText(res);
-    if (res.warnings && res.warnings.length) {
-      live.append(h("div", { class: "warn" }, ...res.warnings.map((w) => h("div", {}, `⚠ ${w}`))));
-    }
-  } else {
-    live.textContent = busy ? "solving…" : (m.rays.length < 2 ? `Needs at least 2 rays (${m.rays.length} so far).` : "");
-  }
-  drawCurrent();
-}
-
-function drawCurrent() {
-  draw.clear("current");
-  const m = state.measure;
-  if (!m) return;
-  const res = m.solution;
-  const mmNow = modelMatrix();
-  const pRendered = res ? applyPoint(mmNow, res.point_ecef) : null;
-  let fallbackLen = 50;
-  if (state.tileset) {
-    const bs = state.tileset.boundingSphere;
-    fallbackLen = null;
-    var centre = [bs.center.x, bs.center.y, bs.center.z];
-    var radius = bs.radius;
-  }
-  let radii = null;
-  draw.batch(() => {
-    m.rays.forEach((ray, i) => {
-      const rr = res && res.rays ? res.rays[i] : null;
-      const color = m.excluded.has(i) ? COLORS.excluded : (rr && rr.outlier ? COLORS.outlier : COLORS.ray);
-      const len = pRendered ? norm(sub(pRendered, ray.origin)) * 1.25
-        : (fallbackLen || norm(sub(centre, ray.origin)) + radius);
-      draw.ray("current", ray.origin, ray.direction, len, color, `${i + 1}`);
-    });
-    if (res) {
-      radii = draw.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, confScale(), COLORS.solution);
-      draw.add("current", {
-        position: cart(pRendered),
-        point: { pixelSize: 14, color: Cesium.Color.TRANSPARENT, outlineColor: COLORS.solution, outlineWidth: 2,
-          disableDepthTestDistance: Number.POSITIVE_INFINITY },
-      });
-    }
-  });
-  $("#ellipsoid-note").textContent = res ? ellipsoidNote(radii) : "";
+function startMeasure(editPoint = null) {
+  if (state.mode === "line" || state.mode === "polygon") cancelFeature();
+  activate(ctx, "measure", editPoint);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -585,7 +391,7 @@ function renderPoints() {
 
 function onPointRowClick(id) {
   if (state.mode === "line" || state.mode === "polygon") { pickFeaturePoint(id); return; }
-  selectPoint(id, true);
+  handlerOf(state, "pick").pick(ctx, id);
 }
 
 function selectPoint(id, fly) {
@@ -685,7 +491,7 @@ function drawSelected() {
   draw.clear("selected");
   drawPoints();
   const p = state.selected ? pointById(state.selected) : null;
-  if (!p || !p.result || state.mode === "measure") return;
+  if (!p || !p.result || activeTool(state).hidesSelection) return;
   const res = p.result;
   const mmNow = modelMatrix();
   const pr = applyPoint(mmNow, res.point_ecef);
@@ -890,7 +696,8 @@ function renderAll() {
 function redrawAll() {
   drawSelected();
   drawFeatures();
-  if (state.mode === "measure") drawCurrent();
+  const tool = activeTool(state);
+  if (tool.redraw) tool.redraw(ctx);
   if (state.feature) renderFeatureDraft();
 }
 
@@ -928,14 +735,13 @@ function nearestPoint(windowPosition, tol) {
 
 const clicks = new Cesium.ScreenSpaceEventHandler(viewer.scene.canvas);
 clicks.setInputAction((ev) => {
-  if (state.mode === "measure") { addRay(ev.position); return; }
-  const id = nearestPoint(ev.position, 14);
   if (state.mode === "line" || state.mode === "polygon") {
+    const id = nearestPoint(ev.position, 14);
     if (id) pickFeaturePoint(id);
     else message("Click on a point marker (or a row of the points list).");
     return;
   }
-  if (id) selectPoint(id, false);
+  handlerOf(state, "click").click(ctx, ev);
 }, Cesium.ScreenSpaceEventType.LEFT_CLICK);
 
 function toggleHelp(show) {
@@ -955,21 +761,23 @@ document.addEventListener("keydown", (ev) => {
     if (ev.key === "Escape") { $("#project-dialog").hidden = true; ev.preventDefault(); }
     return;
   }
-  const inPanel = typing && (t.id === "pt-id" || t.id === "pt-code" || t.id === "pt-desc" || t.id === "feat-code");
+  // Enter and Escape typed in a tool's panel (its code, description, ...) go to the tool
+  const inPanel = typing && t.closest("[data-tool-panel]");
   if (typing && !(inPanel && (ev.key === "Enter" || ev.key === "Escape"))) return;
   const key = ev.key;
-  if (state.mode === "measure") {
-    if (key === "Enter") { finishMeasure(); ev.preventDefault(); return; }
-    if (key === "Escape") { endMeasure(); message("Point cancelled."); ev.preventDefault(); return; }
-    if (key === "Backspace") { removeLastRay(); ev.preventDefault(); return; }
-  } else if (state.mode === "line" || state.mode === "polygon") {
+  const tool = activeTool(state);
+  if (tool.key && tool.key(ctx, ev)) { ev.preventDefault(); return; }
+  const action = { Enter: "finish", Escape: "cancel", Backspace: "undo" }[key];
+  if (action && tool[action]) { tool[action](ctx, ev); ev.preventDefault(); return; }
+  if (state.mode === "line" || state.mode === "polygon") {
     if (key === "Enter") { finishFeature(); ev.preventDefault(); return; }
     if (key === "Escape") { cancelFeature(); ev.preventDefault(); return; }
     if (key === "Backspace") {
       state.feature.points.pop(); renderFeatureDraft(); updateStatus(); ev.preventDefault(); return;
     }
   }
-  if (key === "m" || key === "M") { startMeasure(); ev.preventDefault(); }
+  const shortcut = toolByShortcut(key);
+  if (shortcut) { startTool(shortcut.id); ev.preventDefault(); }
   else if (key === "l" || key === "L") { startFeature("line"); ev.preventDefault(); }
   else if (key === "p" || key === "P") { startFeature("polygon"); ev.preventDefault(); }
   else if (key === "e" || key === "E") { setConf(state.conf === "95" ? "1" : "95"); ev.preventDefault(); }
@@ -983,13 +791,26 @@ function setConf(value) {
   redrawAll();
 }
 
+/** Start a tool by its key or button. */
+function startTool(id, arg) {
+  if (id === "measure") startMeasure(arg);
+  else activate(ctx, id, arg);
+}
+
 function wire() {
-  $("#btn-measure").addEventListener("click", () => { startMeasure(); $("#btn-measure").blur(); });
+  for (const tool of TOOLS) {
+    const button = document.getElementById(`btn-${tool.id}`);
+    if (button) button.addEventListener("click", () => { startTool(tool.id); button.blur(); });
+    if (tool.setup) tool.setup(ctx);
+  }
+  // the panels' Finish / Undo / Cancel buttons act on the active tool
+  document.querySelectorAll("[data-tool-action]").forEach((b) => b.addEventListener("click", () => {
+    const tool = activeTool(state);
+    const action = b.dataset.toolAction;
+    if (tool[action]) tool[action](ctx);
+  }));
   $("#btn-line").addEventListener("click", () => { startFeature("line"); $("#btn-line").blur(); });
   $("#btn-polygon").addEventListener("click", () => { startFeature("polygon"); $("#btn-polygon").blur(); });
-  $("#btn-finish").addEventListener("click", () => finishMeasure());
-  $("#btn-undo").addEventListener("click", () => removeLastRay());
-  $("#btn-cancel").addEventListener("click", () => endMeasure());
   $("#btn-feat-finish").addEventListener("click", () => finishFeature());
   $("#btn-feat-undo").addEventListener("click", () => { state.feature.points.pop(); renderFeatureDraft(); updateStatus(); });
   $("#btn-feat-cancel").addEventListener("click", () => cancelFeature());
@@ -1000,7 +821,6 @@ function wire() {
   $("#btn-settings").addEventListener("click", () => openProjectDialog("edit"));
   $("#pf-cancel").addEventListener("click", () => { $("#project-dialog").hidden = true; });
   $("#project-form").addEventListener("submit", submitProject);
-  $("#pt-id").addEventListener("input", () => { $("#pt-id").dataset.auto = "0"; });
   $("#pf-crs-q").addEventListener("input", () => { clearTimeout(crsTimer); crsTimer = setTimeout(searchCrs, 250); });
   $("#pf-crs-q").addEventListener("keydown", (ev) => { if (ev.key === "Enter") { ev.preventDefault(); searchCrs(); } });
   $("#pf-vertical").addEventListener("input", () => { clearTimeout(verticalTimer); verticalTimer = setTimeout(searchVertical, 250); });

@@ -1,0 +1,259 @@
+// The measure tool (M): each click adds a ray from the camera through the clicked pixel; from
+// two rays on the server intersects them (/api/intersect) and the panel shows the solution,
+// its error ellipsoid and each ray's residual; Enter stores the point (new, or a stored point
+// reopened with "Add rays"). Its state is state.measure:
+// {rays, excluded: Set, editing, pointId, solution, error, seq}.
+
+import { api } from "../api.js";
+import { COLORS, cart } from "../draw.js";
+import { $, fixed, h, mm } from "../format.js";
+import { applyPoint, norm, sub } from "../linalg.js";
+import { captureRay } from "../rays.js";
+
+const Cesium = window.Cesium;
+
+/** The next free automatic point id P<n> (above every stored P<number>). */
+function nextPointId(points) {
+  const used = new Set(points.map((p) => p.id));
+  let n = 1;
+  for (const p of points) {
+    const m = /^P(\d+)$/.exec(p.id);
+    if (m) n = Math.max(n, Number(m[1]) + 1);
+  }
+  while (used.has(`P${n}`)) n++;
+  return `P${n}`;
+}
+
+function activeExcluded(m) {
+  return [...m.excluded].filter((i) => i < m.rays.length);
+}
+
+async function solveLive(ctx) {
+  const m = ctx.state.measure;
+  const seq = ++m.seq;
+  m.solution = null;
+  m.error = null;
+  if (m.rays.length - activeExcluded(m).length < 2) { render(ctx); return; }
+  render(ctx, true);
+  try {
+    const res = await api("POST", "/intersect", {
+      rays: m.rays, exclude: activeExcluded(m), id: m.pointId, ...ctx.solveSettings(),
+    });
+    if (ctx.state.measure !== m || seq !== m.seq) return;
+    m.solution = res;
+  } catch (exc) {
+    if (ctx.state.measure !== m || seq !== m.seq) return;
+    m.error = exc.message;
+  }
+  render(ctx);
+}
+
+function toggleExclude(ctx, i) {
+  const m = ctx.state.measure;
+  if (m.excluded.has(i)) m.excluded.delete(i); else m.excluded.add(i);
+  solveLive(ctx);
+}
+
+function ellipsoidNote(conf, radii) {
+  const what = conf === "95"
+    ? "95 % confidence ellipsoid (3-D: 2.7955 σ on each principal axis)"
+    : "1σ ellipsoid (holds only 19.9 % of the probability in 3-D; 95 % is 2.7955× larger)";
+  if (!radii || !radii.every(Number.isFinite)) return `Drawn: ${what}.`;
+  return `Drawn at true size: ${what}; semi-axes ${radii.map((r) => mm(r)).join(" × ")} mm.`;
+}
+
+function solutionText(res) {
+  const lines = [];
+  if (res.crs) {
+    lines.push(`E ${fixed(res.easting)}  N ${fixed(res.northing)}  H ${fixed(res.height)} m`);
+    lines.push(`   ${res.crs}${res.vertical_datum ? " + " + res.vertical_datum : ""} (${res.height_type || "h"})`);
+    lines.push(`σ E/N/H ${mm(res.sigma_e)} / ${mm(res.sigma_n)} / ${mm(res.sigma_h)} mm (1σ)`);
+  }
+  lines.push(`lon ${fixed(res.lon, 8)}  lat ${fixed(res.lat, 8)}  h ${fixed(res.h_wgs84)} m (WGS 84)`);
+  lines.push(`σ0 ${fixed(res.sigma0, 2)}   rays ${res.n_rays}   max angle ${fixed(res.max_angle_deg, 1)}°   rms ${mm(res.rms_m)} mm`);
+  return lines.join("\n");
+}
+
+/** The panel: one row per ray (residuals, outlier flag, exclude button) and the live solution. */
+function render(ctx, busy = false) {
+  const m = ctx.state.measure;
+  if (!m) return;
+  const res = m.solution;
+  $("#ray-table tbody").replaceChildren(...m.rays.map((ray, i) => {
+    const rr = res && res.rays ? res.rays[i] : null;
+    const excluded = m.excluded.has(i);
+    const outlier = rr && rr.outlier;
+    return h("tr", { class: excluded ? "excluded" : (outlier ? "outlier" : "") },
+      h("td", {}, `${i + 1}${outlier ? " ⚑ outlier" : ""}`),
+      h("td", { class: "num" }, rr ? fixed(rr.residual_px, 2) : "—"),
+      h("td", { class: "num" }, rr ? mm(rr.residual_m) : "—"),
+      h("td", {}, h("button", { onclick: () => toggleExclude(ctx, i), title: excluded ? "use this ray again" : "leave this ray out of the solution" }, excluded ? "restore" : "exclude")));
+  }));
+  const live = $("#live-solution");
+  live.classList.remove("error");
+  if (m.error) {
+    live.textContent = m.error;
+    live.classList.add("error");
+  } else if (res) {
+    live.textContent = solutionText(res);
+    if (res.warnings && res.warnings.length) {
+      live.append(h("div", { class: "warn" }, ...res.warnings.map((w) => h("div", {}, `⚠ ${w}`))));
+    }
+  } else {
+    live.textContent = busy ? "solving…" : (m.rays.length < 2 ? `Needs at least 2 rays (${m.rays.length} so far).` : "");
+  }
+  draw(ctx);
+}
+
+/** The rays (rendered ECEF), and from two rays on the solution's marker and ellipsoid. */
+function draw(ctx) {
+  const { state, draw: drawer } = ctx;
+  drawer.clear("current");
+  const m = state.measure;
+  if (!m) return;
+  const res = m.solution;
+  const mmNow = ctx.modelMatrix();
+  const pRendered = res ? applyPoint(mmNow, res.point_ecef) : null;
+  // without a solution a ray reaches past the tileset's bounding sphere (50 m without a tileset)
+  const reach = (origin) => {
+    if (!state.tileset) return 50;
+    const bs = state.tileset.boundingSphere;
+    return norm(sub([bs.center.x, bs.center.y, bs.center.z], origin)) + bs.radius;
+  };
+  let radii = null;
+  drawer.batch(() => {
+    m.rays.forEach((ray, i) => {
+      const rr = res && res.rays ? res.rays[i] : null;
+      const color = m.excluded.has(i) ? COLORS.excluded : (rr && rr.outlier ? COLORS.outlier : COLORS.ray);
+      const len = pRendered ? norm(sub(pRendered, ray.origin)) * 1.25 : reach(ray.origin);
+      drawer.ray("current", ray.origin, ray.direction, len, color, `${i + 1}`);
+    });
+    if (res) {
+      radii = drawer.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, ctx.confScale(), COLORS.solution);
+      drawer.add("current", {
+        position: cart(pRendered),
+        point: { pixelSize: 14, color: Cesium.Color.TRANSPARENT, outlineColor: COLORS.solution, outlineWidth: 2,
+          disableDepthTestDistance: Number.POSITIVE_INFINITY },
+      });
+    }
+  });
+  $("#ellipsoid-note").textContent = res ? ellipsoidNote(state.conf, radii) : "";
+}
+
+function end(ctx) {
+  ctx.state.measure = null;
+  $("#measure-panel").hidden = true;
+  ctx.draw.clear("current");
+  ctx.done();
+}
+
+const measure = {
+  id: "measure",
+  shortcut: "M",
+  label: "Measure point",
+  title: "Measure a point (M)",
+  primary: true,
+  hidesSelection: true, // the selected point's rays and ellipsoid would mix with the new ones
+
+  setup() {
+    // the server picks the next free id unless the user types one
+    $("#pt-id").addEventListener("input", () => { $("#pt-id").dataset.auto = "0"; });
+  },
+
+  /** Start a new point, or reopen the stored point `editPoint` to add rays to it. */
+  start(ctx, editPoint = null) {
+    const { state } = ctx;
+    state.measure = {
+      rays: editPoint ? editPoint.rays.map((r) => ({ ...r })) : [],
+      excluded: new Set(editPoint ? editPoint.excluded : []),
+      editing: editPoint ? editPoint.id : null,
+      pointId: editPoint ? editPoint.id : nextPointId(state.points),
+      solution: null, error: null, seq: 0,
+    };
+    $("#pt-id").value = state.measure.pointId;
+    $("#pt-id").dataset.auto = "1";
+    $("#pt-id").disabled = Boolean(editPoint);
+    $("#pt-code").value = editPoint ? editPoint.code : "";
+    $("#pt-desc").value = editPoint ? editPoint.description : "";
+    $("#measure-panel").hidden = false;
+    $("#measure-title").textContent = editPoint ? `Adding rays to ${editPoint.id}` : `New point ${state.measure.pointId}`;
+    if (editPoint) solveLive(ctx); else render(ctx);
+  },
+
+  /** A point in progress is finished or cancelled first: M again does nothing. */
+  leave(ctx, next) {
+    if (next !== measure) ctx.message("Finish or cancel the point first (Enter / Esc).", true);
+    return false;
+  },
+
+  /** A click adds a ray through the clicked pixel. */
+  click(ctx, event) {
+    const ray = captureRay(ctx.viewer, event.position, ctx.modelMatrix());
+    if (!ray) { ctx.message("This click gives no ray (is the camera perspective?).", true); return; }
+    ctx.state.measure.rays.push(ray);
+    solveLive(ctx);
+    ctx.updateStatus();
+  },
+
+  /** Backspace: remove the last ray. */
+  undo(ctx) {
+    const m = ctx.state.measure;
+    if (!m.rays.length) { ctx.message("There is no ray to remove; Esc cancels the point."); return; }
+    m.rays.pop();
+    m.excluded.delete(m.rays.length);
+    solveLive(ctx);
+    ctx.updateStatus();
+  },
+
+  /** Enter: store the point (POST a new one, PATCH a reopened one). */
+  async finish(ctx) {
+    const { state } = ctx;
+    const m = state.measure;
+    if (!state.project) { ctx.message("Create or open a project first (top bar), then press Enter again.", true); return; }
+    if (m.rays.length < 2) { ctx.message(`A point needs at least 2 rays; ${m.pointId} has ${m.rays.length}.`, true); return; }
+    const code = $("#pt-code").value.trim();
+    const description = $("#pt-desc").value.trim();
+    const pid = encodeURIComponent(state.project.id);
+    const excluded = activeExcluded(m).sort((a, b) => a - b);
+    try {
+      let pt;
+      if (m.editing) {
+        const url = `/projects/${pid}/points/${encodeURIComponent(m.editing)}`;
+        pt = await api("PATCH", url, { rays: m.rays, excluded, code, description });
+      } else {
+        const id = ($("#pt-id").dataset.auto !== "1" && $("#pt-id").value.trim()) || undefined;
+        pt = await api("POST", `/projects/${pid}/points`, { id, code, description, rays: m.rays, excluded });
+      }
+      end(ctx);
+      await ctx.pointStored(pt, m.editing || pt.id);
+      ctx.selectPoint(pt.id, false);
+      const r = pt.record || {};
+      ctx.message(pt.status === "solved"
+        ? `Stored ${pt.id}: ${r.crs ? `E ${fixed(r.easting)} N ${fixed(r.northing)} H ${fixed(r.height)}` : `lon ${fixed(r.lon, 8)} lat ${fixed(r.lat, 8)} h ${fixed(r.h_wgs84)}`}`
+        : `Stored ${pt.id}, but it could not be solved: ${pt.error}`, pt.status !== "solved");
+    } catch (exc) {
+      ctx.fail(exc);
+    }
+  },
+
+  /** Escape (`event` is the key) or the panel's Cancel button: drop the point. */
+  cancel(ctx, event) {
+    end(ctx);
+    if (event) ctx.message("Point cancelled.");
+  },
+
+  status(ctx) {
+    const m = ctx.state.measure;
+    const n = m.rays.length;
+    const name = m.editing ? `point ${m.editing}` : m.pointId;
+    let text;
+    if (n === 0) text = `Measuring ${name}: click the feature to add ray 1. Esc cancels.`;
+    else if (n === 1) text = `Ray 1 of ${name} added. Move the camera to another viewpoint (30° or more away) and click the same feature for ray 2. Backspace removes ray 1, Esc cancels.`;
+    else text = `${n} rays on ${name}. Click the feature from another viewpoint for ray ${n + 1}, or press Enter to store it. Backspace removes ray ${n}, Esc cancels.`;
+    return { text, className: "measuring" };
+  },
+
+  redraw: draw,
+};
+
+export default measure;
