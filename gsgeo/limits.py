@@ -39,35 +39,36 @@ MAX_INT_BITS = 256
 _BAD_ID_CHAR = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
 
 
-def _finite(value: Any, where: str, unit: str) -> float:
+def _finite(value: Any, field: str, unit: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"{where}: expected a number of {unit}")
+        raise InputError(f"expected a number of {unit}", field=field)
     try:
         v = float(value)
     except OverflowError:
-        raise InputError(f"{where}: expected a finite number of {unit}, got an integer too "
-                         "large for a float") from None
+        raise InputError(f"expected a finite number of {unit}, got an integer too large for "
+                         "a float", field=field) from None
     if not math.isfinite(v):
-        raise InputError(f"{where}: expected a finite number of {unit}")
+        raise InputError(f"expected a finite number of {unit}", field=field)
     return v
 
 
-def sigma_px(value: Any, where: str = "sigma_px", minimum: float = SIGMA_PX_MIN) -> float:
+def sigma_px(value: Any, field: str = "sigma_px", minimum: float = SIGMA_PX_MIN) -> float:
     """The aiming precision in pixels, checked to lie in [minimum, SIGMA_PX_MAX]; ``minimum``
-    is SIGMA_PX_MIN at every user-facing edge and SOLVER_SIGMA_PX_MIN in the solver."""
-    v = _finite(value, where, "pixels")
+    is SIGMA_PX_MIN at every user-facing edge and SOLVER_SIGMA_PX_MIN in the solver.
+    ``field``: the JSON path an InputError names."""
+    v = _finite(value, field, "pixels")
     if not minimum <= v <= SIGMA_PX_MAX:
-        raise InputError(f"{where}: must be between {minimum:g} and {SIGMA_PX_MAX:g} pixels, "
-                         f"got {v:g}")
+        raise InputError(f"must be between {minimum:g} and {SIGMA_PX_MAX:g} pixels, got {v:g}",
+                         field=field)
     return v
 
 
-def ifov(value: Any, where: str = "ifov") -> float:
+def ifov(value: Any, field: str = "ifov") -> float:
     """The angular size of a pixel in radians, checked to lie in [IFOV_MIN, IFOV_MAX]."""
-    v = _finite(value, where, "radians per pixel")
+    v = _finite(value, field, "radians per pixel")
     if not IFOV_MIN <= v <= IFOV_MAX:
-        raise InputError(f"{where}: must be between {IFOV_MIN:g} and {IFOV_MAX:g} radians per "
-                         f"pixel, got {v:g}")
+        raise InputError(f"must be between {IFOV_MIN:g} and {IFOV_MAX:g} radians per pixel, "
+                         f"got {v:g}", field=field)
     return v
 
 
@@ -99,7 +100,7 @@ def direction_problem(direction: Any) -> str | None:
     return None
 
 
-def id_text(value: Any, where: str) -> str:
+def id_text(value: Any, field: str) -> str:
     """An id (point, line, polygon, check point) as given, or InputError.
 
     Text or an integer; never empty or blank, never holding a control character, a line or
@@ -107,13 +108,13 @@ def id_text(value: Any, where: str) -> str:
     """
     if isinstance(value, bool) or not isinstance(value, (str, int)) or (
             isinstance(value, int) and value.bit_length() > MAX_INT_BITS):
-        raise InputError(f"{where}: expected text")
+        raise InputError("expected text", field=field)
     v = str(value)
     bad = _BAD_ID_CHAR.search(v)
     if bad:
-        raise InputError(f"{where}: contains U+{ord(bad.group()):04X} at position {bad.start() + 1} "
+        raise InputError(f"contains U+{ord(bad.group()):04X} at position {bad.start() + 1} "
                          "(a control character, line or paragraph separator or unpaired "
-                         "surrogate); ids must be printable text")
+                         "surrogate); ids must be printable text", field=field)
     if not v.strip():
-        raise InputError(f"{where}: must not be empty")
+        raise InputError("must not be empty", field=field)
     return v

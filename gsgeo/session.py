@@ -21,7 +21,7 @@ import numpy as np
 import orjson
 
 from gsgeo import limits
-from gsgeo.errors import InputError
+from gsgeo.errors import InputError, join_field
 
 #: Largest session file read, bytes (10 000 points of 10 rays take about 5 MB).
 MAX_SESSION_BYTES = 200 * 1024 * 1024
@@ -90,17 +90,18 @@ def load_session(path: str | Path) -> Session:
         with open(p, "rb") as fh:
             data = fh.read(MAX_SESSION_BYTES + 1)  # bounded even for /dev/zero or a pipe
     except FileNotFoundError:
-        raise InputError(f"{p}: no such file") from None
+        raise InputError("no such file", source=str(p)) from None
     except IsADirectoryError:
-        raise InputError(f"{p}: is a directory, not a session JSON file") from None
+        raise InputError("is a directory, not a session JSON file", source=str(p)) from None
     except OSError as exc:
-        raise InputError(f"{p}: cannot be read: {exc.strerror or exc}") from None
+        raise InputError(f"cannot be read: {exc.strerror or exc}", source=str(p)) from None
     if len(data) > MAX_SESSION_BYTES:
-        raise InputError(f"{p}: larger than {MAX_SESSION_BYTES // 2**20} MiB; not a session file")
+        raise InputError(f"larger than {MAX_SESSION_BYTES // 2**20} MiB; not a session file",
+                         source=str(p))
     try:
         return parse_session(parse_json(data))
     except InputError as exc:
-        raise InputError(f"{p}: {exc}") from None
+        raise exc.in_source(str(p)) from None
 
 
 def parse_json(data: bytes | str) -> Any:
@@ -135,82 +136,85 @@ def _describe(value: Any) -> str:
     return str(value)[:30]
 
 
-def _number(value: Any, where: str) -> float:
+def _number(value: Any, field: str | None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"{where}: expected a number, got {_describe(value)}")
+        raise InputError(f"expected a number, got {_describe(value)}", field=field)
     try:
         v = float(value)
     except OverflowError:
-        raise InputError(f"{where}: expected a finite number, got an integer too large "
-                         "for a float") from None
+        raise InputError("expected a finite number, got an integer too large for a float",
+                         field=field) from None
     if not math.isfinite(v):
-        raise InputError(f"{where}: expected a finite number")
+        raise InputError("expected a finite number", field=field)
     return v
 
 
-def _vector(value: Any, n: int, where: str) -> np.ndarray:
+def _vector(value: Any, n: int, field: str | None) -> np.ndarray:
     if not isinstance(value, list) or len(value) != n:
-        raise InputError(f"{where}: expected a list of {n} numbers")
-    return np.array([_number(v, f"{where}[{i}]") for i, v in enumerate(value)])
+        raise InputError(f"expected a list of {n} numbers", field=field)
+    return np.array([_number(v, join_field(field, f"[{i}]")) for i, v in enumerate(value)])
 
 
-def _text(value: Any, where: str, default: str = "") -> str:
+def _text(value: Any, field: str | None, default: str = "") -> str:
     if value is None:
         return default
     if not isinstance(value, (str, int)) or isinstance(value, bool) or (
             isinstance(value, int) and value.bit_length() > limits.MAX_INT_BITS):
-        raise InputError(f"{where}: expected text")
+        raise InputError("expected text", field=field)
     return str(value)
 
 
-def parse_ray(doc: Any, where: str = "ray") -> Ray:
-    """Validate one ray object of the session JSON."""
+def parse_ray(doc: Any, field: str = "ray") -> Ray:
+    """Validate one ray object of the session JSON; errors name ``field`` (the ray's JSON
+    path) and the member inside it, e.g. ``ray.direction``; ``field=""`` names members alone."""
     if not isinstance(doc, dict):
-        raise InputError(f"{where}: expected an object with origin and direction")
+        raise InputError("expected an object with origin and direction", field=field)
     for key in ("origin", "direction"):
         if key not in doc:
-            raise InputError(f"{where}: missing '{key}'")
-    origin = _vector(doc["origin"], 3, f"{where}.origin")
+            raise InputError(f"missing '{key}'", field=field)
+    at = {key: join_field(field, key)
+          for key in ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")}
+    origin = _vector(doc["origin"], 3, at["origin"])
     problem = limits.origin_problem(origin)
     if problem:
-        raise InputError(f"{where}.origin: {problem}")
-    direction = _vector(doc["direction"], 3, f"{where}.direction")
+        raise InputError(problem, field=at["origin"])
+    direction = _vector(doc["direction"], 3, at["direction"])
     problem = limits.direction_problem(direction)
     if problem:
-        raise InputError(f"{where}.direction: {problem}")
+        raise InputError(problem, field=at["direction"])
     ifov = None
     if doc.get("ifov") is not None:
-        ifov = limits.ifov(_number(doc["ifov"], f"{where}.ifov"), f"{where}.ifov")
+        ifov = limits.ifov(_number(doc["ifov"], at["ifov"]), at["ifov"])
     pixel = viewport = mm = None
     if doc.get("pixel") is not None:
-        pixel = tuple(_vector(doc["pixel"], 2, f"{where}.pixel").tolist())
+        pixel = tuple(_vector(doc["pixel"], 2, at["pixel"]).tolist())
     if doc.get("viewport") is not None:
-        viewport = tuple(_vector(doc["viewport"], 2, f"{where}.viewport").tolist())
+        viewport = tuple(_vector(doc["viewport"], 2, at["viewport"]).tolist())
     if doc.get("model_matrix") is not None:
-        mm = _vector(doc["model_matrix"], 16, f"{where}.model_matrix")
+        mm = _vector(doc["model_matrix"], 16, at["model_matrix"])
         if mm[3] != 0 or mm[7] != 0 or mm[11] != 0 or mm[15] == 0:
-            raise InputError(
-                f"{where}.model_matrix: not an affine 4x4 matrix in column-major order "
-                "(elements 3, 7, 11 must be 0 and element 15 non-zero)"
-            )
+            raise InputError("not an affine 4x4 matrix in column-major order (elements 3, 7, "
+                             "11 must be 0 and element 15 non-zero)", field=at["model_matrix"])
     return Ray(origin, direction, ifov, pixel, viewport, mm)
 
 
-def parse_point(doc: Any, where: str = "point") -> SessionPoint:
-    """Validate one point object (id, code, description, rays)."""
+def parse_point(doc: Any, field: str = "point") -> SessionPoint:
+    """Validate one point object (id, code, description, rays); errors name ``field`` (the
+    point's JSON path) and the member inside it; ``field=""`` names members alone (``rays[1]``)."""
     if not isinstance(doc, dict):
-        raise InputError(f"{where}: expected an object with id and rays")
+        raise InputError("expected an object with id and rays", field=field)
     if "id" not in doc:
-        raise InputError(f"{where}: missing 'id'")
-    pid = limits.id_text(doc["id"], f"{where}.id")
+        raise InputError("missing 'id'", field=field)
+    pid = limits.id_text(doc["id"], join_field(field, "id"))
     rays = doc.get("rays")
     if not isinstance(rays, list):
-        raise InputError(f"{where}.rays: expected a list of rays, got {_describe(rays)}")
+        raise InputError(f"expected a list of rays, got {_describe(rays)}",
+                         field=join_field(field, "rays"))
     return SessionPoint(
         id=pid,
-        rays=[parse_ray(r, f"{where}.rays[{i}]") for i, r in enumerate(rays)],
-        code=_text(doc.get("code"), f"{where}.code"),
-        description=_text(doc.get("description"), f"{where}.description"),
+        rays=[parse_ray(r, join_field(field, f"rays[{i}]")) for i, r in enumerate(rays)],
+        code=_text(doc.get("code"), join_field(field, "code")),
+        description=_text(doc.get("description"), join_field(field, "description")),
     )
 
 
@@ -219,17 +223,17 @@ def _features(doc: Any, key: str) -> list[Feature]:
     if items is None:
         return []
     if not isinstance(items, list):
-        raise InputError(f"{key}: expected a list, got {_describe(items)}")
+        raise InputError(f"expected a list, got {_describe(items)}", field=key)
     out = []
     for i, item in enumerate(items):
-        where = f"{key}[{i}]"
+        at = f"{key}[{i}]"
         if not isinstance(item, dict) or "id" not in item:
-            raise InputError(f"{where}: expected an object with id and points")
+            raise InputError("expected an object with id and points", field=at)
         pts = item.get("points")
         if not isinstance(pts, list) or not pts:
-            raise InputError(f"{where}.points: expected a list of point ids")
-        out.append(Feature(limits.id_text(item["id"], f"{where}.id"),
-                           [limits.id_text(p, f"{where}.points[{j}]") for j, p in enumerate(pts)]))
+            raise InputError("expected a list of point ids", field=f"{at}.points")
+        out.append(Feature(limits.id_text(item["id"], f"{at}.id"),
+                           [limits.id_text(p, f"{at}.points[{j}]") for j, p in enumerate(pts)]))
     return out
 
 
@@ -239,13 +243,13 @@ def parse_session(doc: Any) -> Session:
         raise InputError("the session must be a JSON object with a 'points' list")
     pts = doc.get("points")
     if not isinstance(pts, list):
-        raise InputError("points: expected a list of points"
-                         + ("" if pts is None else f", got {_describe(pts)}"))
+        raise InputError("expected a list of points"
+                         + ("" if pts is None else f", got {_describe(pts)}"), field="points")
     points = [parse_point(p, f"points[{i}]") for i, p in enumerate(pts)]
     seen: set[str] = set()
     for i, p in enumerate(points):
         if p.id in seen:
-            raise InputError(f"points[{i}].id: duplicate point id '{p.id}'")
+            raise InputError(f"duplicate point id '{p.id}'", field=f"points[{i}].id")
         seen.add(p.id)
     sigma_px = 1.0
     if doc.get("sigma_px") is not None:
@@ -271,10 +275,10 @@ def ray_arrays(point: SessionPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray 
     directions = np.array([r.direction for r in point.rays], dtype=np.float64).reshape(-1, 3)
     have = [r.ifov is not None for r in point.rays]
     if any(have) and not all(have):
-        missing = ", ".join(str(i + 1) for i, h in enumerate(have) if not h)
+        missing = [i for i, h in enumerate(have) if not h]
         raise InputError(
-            f"point '{point.id}': ray(s) {missing} have no ifov while others do; "
-            "give ifov on every ray (angular model) or on none (unweighted model)"
-        )
+            f"no ifov on ray(s) {', '.join(map(str, missing))} (0-based) while the others have "
+            "one; give ifov on every ray (angular model) or on none (unweighted model)",
+            field=f"rays[{missing[0]}].ifov")
     ifov = np.array([r.ifov for r in point.rays], dtype=np.float64) if all(have) and have else None
     return origins, directions, ifov

@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     if sigma_px is not None:
         session.sigma_px = sigma_px
     if not session.points:
-        raise InputError(f"{args.session}: the session has no points")
+        raise InputError("the session has no points", source=str(args.session))
     crs = getattr(args, "crs", None) or session.crs
     geoid = getattr(args, "geoid", None)
     if geoid and not Path(geoid).is_file():  # once, before solving, not once per point

@@ -170,13 +170,12 @@ def _exclusion_mask(exclude: Sequence[int], n: int, pid: str) -> np.ndarray:
     mask = np.zeros(n, dtype=bool)
     for k in exclude:
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < n:
-            raise InputError(
-                f"point '{pid}': cannot exclude ray index {k!r}; indices are 0-based, "
-                f"0..{n - 1}"
-            )
+            raise InputError(f"cannot exclude ray index {k!r} of point '{pid}'; indices are "
+                             f"0-based, 0..{n - 1}", field="exclude")
         mask[int(k)] = True
     if n - mask.sum() < 2:
-        raise InputError(f"point '{pid}': excluding {int(mask.sum())} of {n} rays leaves fewer than 2")
+        raise InputError(f"excluding {int(mask.sum())} of {n} rays of point '{pid}' leaves "
+                         "fewer than 2", field="exclude")
     return mask
 
 
@@ -201,18 +200,18 @@ def measure_point(
     o_r, d_r, ifov = ray_arrays(point)
     n = o_r.shape[0]
     if n < 2:
-        raise InputError(f"point '{point.id}': needs at least 2 rays, has {n}")
+        raise InputError(f"point '{point.id}' needs at least 2 rays, has {n}", field="rays")
     mask = _exclusion_mask(exclude, n, point.id)
     keep = ~mask
     o, d, similar = rendered_to_georeferenced(o_r, d_r, [r.model_matrix for r in point.rays])
     for i in range(n):  # a model_matrix can move a sane ray out of range
         problem = limits.origin_problem(o[i]) if np.all(np.isfinite(o[i])) else "not finite"
         if problem:
-            raise InputError(f"point '{point.id}': ray {i + 1}: the georeferenced origin (after "
-                             f"the inverse of its model_matrix) is {problem}")
+            raise InputError("the georeferenced origin (after the inverse of the ray's "
+                             f"model_matrix) is {problem}", field=f"rays[{i}].origin")
         if not (np.all(np.isfinite(d[i])) and np.any(d[i] != 0)):
-            raise InputError(f"point '{point.id}': ray {i + 1}: the direction cannot be "
-                             "georeferenced through its model_matrix")
+            raise InputError("the direction cannot be georeferenced through the ray's "
+                             "model_matrix", field=f"rays[{i}].direction")
     warnings: list[str] = []
     if not similar:
         warnings.append(

@@ -62,21 +62,24 @@ def _name(ids: Sequence[str] | None, i: int) -> str:
 def _check(xyz, cov, ids, what: str) -> tuple[np.ndarray, np.ndarray | None]:
     p = np.asarray(xyz, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] not in (2, 3):
-        raise InputError(f"{what}: coordinates must be an N x 3 array (E, N, H), got shape {p.shape}")
+        raise InputError(f"the {what}'s coordinates must be an N x 3 array (E, N, H), got shape "
+                         f"{p.shape}")
     if p.shape[1] == 2:
         p = np.column_stack([p, np.full(p.shape[0], np.nan)])
     if ids is not None and len(ids) != p.shape[0]:
-        raise InputError(f"{what}: {len(ids)} ids for {p.shape[0]} points")
+        raise InputError(f"the {what} has {len(ids)} ids for {p.shape[0]} points")
     bad = ~np.all(np.isfinite(p[:, :2]), axis=1)
     if bad.any():
-        raise InputError(f"{what}: {_name(ids, int(np.flatnonzero(bad)[0]))} has no finite easting/northing")
+        raise InputError(f"the {what}'s point {_name(ids, int(np.flatnonzero(bad)[0]))} has no "
+                         "finite easting/northing")
     c = None
     if cov is not None:
         c = np.asarray(cov, dtype=np.float64)
         if c.shape != (p.shape[0], 3, 3):
-            raise InputError(f"{what}: covariances must be N x 3 x 3 (m²), got shape {c.shape}")
+            raise InputError(f"the {what}'s covariances must be N x 3 x 3 (m²), got shape "
+                             f"{c.shape}")
         if not np.all(np.isfinite(c[:, :2, :2])):
-            raise InputError(f"{what}: covariances contain NaN or infinite values")
+            raise InputError(f"the {what}'s covariances contain NaN or infinite values")
     return p, c
 
 

@@ -225,7 +225,7 @@ def _feature_parts(item: Any, kind: str, i: int) -> tuple[str, list[str]]:
         if pids is None:
             pids = _get(item, "point_ids")
     if fid is None or pids is None or isinstance(pids, str):
-        raise InputError(f"{kind}s[{i}]: expected an id and a list of point ids")
+        raise InputError("expected an id and a list of point ids", field=f"{kind}s[{i}]")
     return str(fid), [str(p) for p in pids]
 
 
@@ -382,9 +382,10 @@ def _check_text(layer: str, table: Table) -> None:
             continue
         k = next(k for k, v in enumerate(col) if not ok(v))
         ident = table.columns[next(iter(table.columns))][k]
-        where = f"{layer} '{ident}'" if ok(ident) else f"{layer}[{k}]"
-        raise InputError(f"{where}: {name} is not valid Unicode text (a lone surrogate such as "
-                         "\\ud800)")
+        problem = f"{name} is not valid Unicode text (a lone surrogate such as \\ud800)"
+        if ok(ident):  # named by its id, which a reader finds more easily than an index
+            raise InputError(f"{layer} '{ident}': {problem}")
+        raise InputError(problem, field=f"{layer}[{k}]")
 
 
 def _measurement_rays(ms: list):
@@ -486,7 +487,7 @@ def _measure_features(kind: str, rows: list, xyz, cov, unit: float, vunit: float
         try:
             m = single(pts[k], covs[k], pids, unit_m=unit, vertical_unit_m=vunit)
         except GsgeoError as exc:
-            raise type(exc)(f"{kind} '{fid}': {exc}") from None
+            raise exc.part_of(None, f"{kind} '{fid}'") from None
         for name, value in vars(m).items():
             getattr(out, name)[k] = math.nan if value is None else value
     return out
@@ -539,7 +540,7 @@ def _collect_check_points(data, check_points, index, xyz, g) -> None:
             v = next((_get(c, k) for k in names if _get(c, k) is not None), None)
             vals.append(v)
         if cid is None or vals[0] is None or vals[1] is None:
-            raise InputError(f"check_points[{i}]: expected an id and easting/northing (x/y)")
+            raise InputError("expected an id and easting/northing (x/y)", field=f"check_points[{i}]")
         crs = _get(c, "crs")
         if crs and not parse_crs(str(crs)).equals(parse_crs(data.crs)) and not \
                 parse_crs(str(crs)).equals(parse_crs(data.horizontal_crs)):

@@ -170,7 +170,7 @@ def patch_project(pid: PID, body: m.ProjectPatch, request: Request) -> dict[str,
     changes = body.model_dump(exclude_unset=True)
     for key in ("name", "source_crs", "sigma_px"):
         if key in changes and changes[key] is None:
-            raise InputError(f"{key}: must not be null")
+            raise InputError("must not be null", field=key)
     return project_json(svc(request).update_project(pid, changes))
 
 
@@ -309,7 +309,7 @@ def add_check_points(pid: PID, body: m.CheckPointsCreate, request: Request) -> d
     ids = [r.id for r in rows]
     if len(set(ids)) != len(ids):
         dup = next(i for i in ids if ids.count(i) > 1)
-        raise InputError(f"points: duplicate id '{dup}'")
+        raise InputError(f"duplicate id '{dup}'", field="points")
     n = svc(request).add_check_points(pid, rows, body.crs, role=body.role, replace=body.replace)
     return {"imported": n}
 
@@ -328,13 +328,14 @@ def import_check_points(
 ) -> dict[str, Any]:
     fmt = format or format_from_name(file.filename)
     if fmt is None:
-        raise InputError(f"format: cannot tell the format of '{file.filename}'; give format="
-                         f"{'|'.join(FORMATS)}")
+        raise InputError(f"cannot tell the format of '{file.filename}'; give format="
+                         f"{'|'.join(FORMATS)}", field="format")
     data = file.file.read()
     rows, file_crs = read_check_points(data, fmt, file.filename)
     crs = (crs or "").strip() or file_crs or ("EPSG:4979" if fmt == "geojson" else None)
     if crs is None:
-        raise InputError("crs: state the CRS the file's coordinates are in, e.g. EPSG:27700")
+        raise InputError("state the CRS the file's coordinates are in, e.g. EPSG:27700",
+                         field="crs")
     n = svc(request).add_check_points(pid, rows, crs, role=role, replace=replace,
                                       source=(file.filename or "")[:300])
     return {"imported": n, "crs": crs, "format": fmt}

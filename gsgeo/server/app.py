@@ -67,11 +67,6 @@ class ServerConfig:
             self.allowed_hosts = LOOPBACK_HOSTS | {self.host.lower()}
 
 
-def _field_of(message: str) -> str | None:
-    head = message.split(":", 1)[0]
-    return head if ":" in message and " " not in head.strip() and head else None
-
-
 def _loc(loc: tuple | list) -> str:
     parts = list(loc[1:]) if loc and loc[0] in ("body", "query", "path", "header") else list(loc)
     if not parts:
@@ -112,7 +107,7 @@ def _install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(ConflictError)
     async def conflict(_req: Request, exc: ConflictError) -> JSONResponse:
-        return _error(409, str(exc), _field_of(str(exc)))
+        return _error(409, str(exc), exc.field)
 
     @app.exception_handler(StoreError)
     async def store_error(_req: Request, exc: StoreError) -> JSONResponse:
@@ -126,8 +121,7 @@ def _install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(GsgeoError)
     async def gsgeo_error(_req: Request, exc: GsgeoError) -> JSONResponse:
-        msg = str(exc)
-        return _error(422, msg, _field_of(msg))
+        return _error(422, str(exc), exc.field)
 
     @app.exception_handler(BodyTooLarge)
     async def too_large(_req: Request, exc: BodyTooLarge) -> JSONResponse:

@@ -24,7 +24,7 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
                    crs: str | None = None) -> tuple[Path, list[str]]:
     """Write the export into ``outdir``; returns (path, skipped feature descriptions)."""
     if fmt not in SUFFIX:
-        raise InputError(f"format: must be one of {', '.join(SUFFIX)}")
+        raise InputError(f"must be one of {', '.join(SUFFIX)}", field="format")
     project = svc.get_project(pid)
     points = svc.list_points(pid)
     if crs is not None and crs.strip() and crs.strip() != project.crs:
@@ -44,7 +44,8 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
         grid_crs = settings["crs"]
     else:
         if project.crs is None:
-            raise InputError(f"crs: project '{pid}' has no grid CRS; give ?crs=EPSG:... to export")
+            raise InputError(f"project '{pid}' has no grid CRS; give ?crs=EPSG:... to export",
+                             field="crs")
         measurements = [pt.result for pt in points if pt.result is not None]
         by_id = {pt.id: pt.record for pt in points if pt.record is not None}
         grid_crs = project.crs

@@ -51,23 +51,25 @@ def format_from_name(filename: str | None) -> str | None:
             "gpkg": "gpkg"}.get(suffix)
 
 
-def _num(value: Any, where: str, optional: bool = False) -> float | None:
+def _num(value: Any, field: str, optional: bool = False) -> float | None:
+    """A coordinate of a check-point file; ``field`` is where it is in the file (line and
+    column of a CSV, JSON path of a GeoJSON)."""
     if value is None or (isinstance(value, str) and not value.strip()):
         if optional:
             return None
-        raise InputError(f"{where}: missing")
+        raise InputError("missing", field=field)
     if isinstance(value, bool) or not isinstance(value, (str, int, float)):
-        raise InputError(f"{where}: expected a number, got {type(value).__name__}")
+        raise InputError(f"expected a number, got {type(value).__name__}", field=field)
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise InputError(f"{where}: expected a number, got {value[:30]!r}") from None
+        raise InputError(f"expected a number, got {value[:30]!r}", field=field) from None
     except OverflowError:
-        raise InputError(f"{where}: the number is too large") from None
+        raise InputError("the number is too large", field=field) from None
     if not math.isfinite(v):
         if optional and math.isnan(v):
             return None
-        raise InputError(f"{where}: expected a finite number")
+        raise InputError("expected a finite number", field=field)
     return v
 
 
@@ -104,29 +106,29 @@ def _read_csv(data: bytes) -> list[CheckPointRow]:
                 "the CSV header needs an id column (point_id, id or name) and coordinate "
                 f"columns (easting/northing[/height] or x/y[/z]); found {', '.join(cols)[:200]!r}")
         for r in reader:
-            where = f"line {reader.line_num}"
+            at = f"line {reader.line_num}"
             rows.append(CheckPointRow(
-                item_id(r.get(cid), f"{where}, column {cid}"),
-                _num(r.get(cx), f"{where}, column {cx}"),
-                _num(r.get(cy), f"{where}, column {cy}"),
-                _num(r.get(cz), f"{where}, column {cz}", True) if cz else None))
+                item_id(r.get(cid), f"{at}, column {cid}"),
+                _num(r.get(cx), f"{at}, column {cx}"),
+                _num(r.get(cy), f"{at}, column {cy}"),
+                _num(r.get(cz), f"{at}, column {cz}", True) if cz else None))
             _count(rows)
     except csv.Error as exc:
         limit = csv.field_size_limit()
         what = f"a field is longer than {limit} characters" if "field limit" in str(exc) \
             else f"not readable as CSV ({exc})"
-        raise InputError(f"line {reader.line_num + 1}: {what}") from None
+        raise InputError(what, field=f"line {reader.line_num + 1}") from None
     return rows
 
 
-def _feature_id(props: dict, fallback: Any, where: str) -> str:
+def _feature_id(props: dict, fallback: Any, field: str) -> str:
     for key in ID_COLUMNS:
         for k, v in props.items():
             if k.lower() == key and v is not None:
-                return item_id(v, f"{where}.properties.{k}")
+                return item_id(v, f"{field}.properties.{k}")
     if fallback is not None:
-        return item_id(fallback, f"{where}.id")
-    raise InputError(f"{where}: no point id (properties point_id, id or name)")
+        return item_id(fallback, f"{field}.id")
+    raise InputError("no point id (properties point_id, id or name)", field=field)
 
 
 def _read_geojson(data: bytes) -> list[CheckPointRow]:
@@ -143,23 +145,23 @@ def _read_geojson(data: bytes) -> list[CheckPointRow]:
         raise InputError(f"more than {MAX_CHECK_POINTS} check points")
     rows = []
     for i, f in enumerate(doc["features"]):
-        where = f"features[{i}]"
+        at = f"features[{i}]"
         if not isinstance(f, dict):
-            raise InputError(f"{where}: expected a Feature object")
+            raise InputError("expected a Feature object", field=at)
         geom = f.get("geometry")
         if not isinstance(geom, dict) or geom.get("type") != "Point":
-            raise InputError(f"{where}.geometry: expected a Point")
+            raise InputError("expected a Point", field=f"{at}.geometry")
         c = geom.get("coordinates")
         if not isinstance(c, list) or len(c) not in (2, 3):
-            raise InputError(f"{where}.geometry.coordinates: expected 2 or 3 numbers")
+            raise InputError("expected 2 or 3 numbers", field=f"{at}.geometry.coordinates")
         props = f.get("properties") or {}
         if not isinstance(props, dict):
-            raise InputError(f"{where}.properties: expected an object")
+            raise InputError("expected an object", field=f"{at}.properties")
         rows.append(CheckPointRow(
-            _feature_id(props, f.get("id"), where),
-            _num(c[0], f"{where}.geometry.coordinates[0]"),
-            _num(c[1], f"{where}.geometry.coordinates[1]"),
-            _num(c[2], f"{where}.geometry.coordinates[2]", True) if len(c) == 3 else None))
+            _feature_id(props, f.get("id"), at),
+            _num(c[0], f"{at}.geometry.coordinates[0]"),
+            _num(c[1], f"{at}.geometry.coordinates[1]"),
+            _num(c[2], f"{at}.geometry.coordinates[2]", True) if len(c) == 3 else None))
     return rows
 
 
@@ -191,15 +193,15 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
         raise InputError(f"cannot be read as a GeoPackage: {exc}") from None
     rows: list[CheckPointRow] = []
     for i, (pid, geom) in enumerate(zip(df[cid], df.geometry, strict=True)):
-        where = f"layer {point_layers[0]} feature {i}"
+        at = f"layer {point_layers[0]} feature {i}"
         if geom is None or geom.geom_type != "Point" or geom.is_empty:
-            raise InputError(f"{where}: expected a Point geometry")
+            raise InputError("expected a Point geometry", field=at)
         z = geom.z if geom.has_z else None
         pid = pid.item() if hasattr(pid, "item") else pid  # numpy scalar -> int, float, str
-        rows.append(CheckPointRow(item_id(pid, f"{where}, column {cid}"),
-                                  _num(float(geom.x), f"{where} x"),
-                                  _num(float(geom.y), f"{where} y"),
-                                  _num(None if z is None else float(z), f"{where} z", True)))
+        rows.append(CheckPointRow(item_id(pid, f"{at}, column {cid}"),
+                                  _num(float(geom.x), f"{at} x"),
+                                  _num(float(geom.y), f"{at} y"),
+                                  _num(None if z is None else float(z), f"{at} z", True)))
         _count(rows)
     crs = None
     if file_crs is not None:
@@ -233,11 +235,12 @@ def read_check_points(data: bytes, fmt: str,
                       name: str | None = None) -> tuple[list[CheckPointRow], str | None]:
     """Rows of a check-point file and the CRS the file itself declares (GeoPackage only).
 
-    A file that cannot be read raises InputError ``file: 'NAME': where: what is wrong``."""
+    A file that cannot be read raises InputError about the field ``file`` whose problem names
+    the file, the place in it and what is wrong: ``file: 'NAME': line 3, column x: missing``."""
     if fmt not in FORMATS:
-        raise InputError(f"format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+        raise InputError(f"must be one of {', '.join(FORMATS)}, got {fmt!r}", field="format")
     try:
         return _rows(data, fmt)
     except InputError as exc:
         label = repr(name[:100]) if name else f"the {fmt} file"
-        raise InputError(f"file: {label}: {exc}") from None
+        raise exc.part_of("file", label) from None

@@ -43,13 +43,13 @@ MAX_RAYS = 1000
 MAX_FEATURE_POINTS = 10_000
 
 
-def _text(value: Any, where: str, max_len: int = 2000) -> str:
+def _text(value: Any, field: str, max_len: int = 2000) -> str:
     if value is None:
         return ""
     if not isinstance(value, str):
-        raise InputError(f"{where}: expected text")
+        raise InputError("expected text", field=field)
     if len(value) > max_len:
-        raise InputError(f"{where}: longer than {max_len} characters")
+        raise InputError(f"longer than {max_len} characters", field=field)
     return value
 
 
@@ -61,27 +61,27 @@ def validate_settings(settings: dict[str, Any], data_dir: Path | None) -> dict[s
     for key in ("crs", "vertical", "geoid"):
         v = out.get(key)
         if v is not None and (not isinstance(v, str) or not v.strip()):
-            raise InputError(f"{key}: expected text or null")
+            raise InputError("expected text or null", field=key)
         out[key] = v.strip() if isinstance(v, str) else None
     src = out.get("source_crs") or "EPSG:4978"
     if not isinstance(src, str):
-        raise InputError("source_crs: expected text such as EPSG:4978")
+        raise InputError("expected text such as EPSG:4978", field="source_crs")
     out["source_crs"] = src.strip()
     out["sigma_px"] = sigma_px(out.get("sigma_px", 1.0))
     try:
         source_crs(out["source_crs"])
     except CRSError as exc:
-        raise CRSError(f"source_crs: {exc}") from None
+        raise exc.within("source_crs") from None
     if out["crs"] is None and (out["vertical"] or out["geoid"]):
-        raise CRSError("vertical: a vertical datum or geoid needs a grid crs as well")
+        raise CRSError("a vertical datum or geoid needs a grid crs as well", field="vertical")
     if out["vertical"] and out["geoid"]:
-        raise CRSError("geoid: give either a vertical CRS or a geoid grid, not both")
+        raise CRSError("give either a vertical CRS or a geoid grid, not both", field="geoid")
     if out["crs"] is not None:
         try:
             grid_crs(out["crs"], out["vertical"])
         except CRSError as exc:
             field = "vertical" if out["vertical"] and "vertical" in str(exc).lower() else "crs"
-            raise CRSError(f"{field}: {exc}") from None
+            raise exc.within(field) from None
     resolve_geoid(out["geoid"], data_dir)
     return out
 
@@ -127,7 +127,7 @@ class Projects:
                        scene: str | None = None, **settings: Any) -> Project:
         name = _text(name, "name", 200).strip()
         if not name:
-            raise InputError("name: must not be empty")
+            raise InputError("must not be empty", field="name")
         if id is None:
             base = re.sub(r"[^A-Za-z0-9_.-]+", "-", name).strip("-.")[:40] or "project"
             if not base[0].isalnum():
@@ -149,7 +149,8 @@ class Projects:
         scene = slug(scene, "scene")
         if self.data_dir is not None:
             if not (self.data_dir / "scenes" / scene / "tileset.json").is_file():
-                raise InputError(f"scene: no scene '{scene}' in {self.data_dir / 'scenes'}")
+                raise InputError(f"no scene '{scene}' in {self.data_dir / 'scenes'}",
+                                 field="scene")
         return scene
 
     def update_project(self, pid: str, changes: dict[str, Any]) -> Project:
@@ -157,13 +158,13 @@ class Projects:
         every point from its rays in the same transaction."""
         unknown = set(changes) - {"name", "description", "scene", *SETTINGS}
         if unknown:
-            raise InputError(f"{sorted(unknown)[0]}: not a project field")
+            raise InputError("not a project field", field=sorted(unknown)[0])
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
             if "name" in changes:
                 name = _text(changes["name"], "name", 200).strip()
                 if not name:
-                    raise InputError("name: must not be empty")
+                    raise InputError("must not be empty", field="name")
                 p.name = name
             if "description" in changes:
                 p.description = _text(changes["description"], "description")
@@ -172,7 +173,7 @@ class Projects:
             if any(k in changes for k in SETTINGS):
                 new = p.settings() | {k: changes[k] for k in SETTINGS if k in changes}
                 if new.get("sigma_px") is None:
-                    raise InputError("sigma_px: must be a number of pixels, not null")
+                    raise InputError("must be a number of pixels, not null", field="sigma_px")
                 new = validate_settings(new, self.data_dir)
                 if new != p.settings():
                     for k in SETTINGS:
@@ -234,13 +235,13 @@ class Projects:
         return pt
 
     @staticmethod
-    def _rays(rays: Any, where: str = "rays") -> list[dict[str, Any]]:
+    def _rays(rays: Any, field: str = "rays") -> list[dict[str, Any]]:
         if not isinstance(rays, list):
-            raise InputError(f"{where}: expected a list of rays")
+            raise InputError("expected a list of rays", field=field)
         if len(rays) < 2:
-            raise InputError(f"{where}: a point needs at least two rays, got {len(rays)}")
+            raise InputError(f"a point needs at least two rays, got {len(rays)}", field=field)
         if len(rays) > MAX_RAYS:
-            raise InputError(f"{where}: more than {MAX_RAYS} rays")
+            raise InputError(f"more than {MAX_RAYS} rays", field=field)
         sp = session_point("x", rays)  # validates each ray, errors name rays[i]...
         return [r.to_dict() for r in sp.rays]
 
@@ -260,7 +261,8 @@ class Projects:
             else:
                 point_id = item_id(doc["id"], "id")
                 if tx.get_point(pid, point_id) is not None:
-                    raise ConflictError(f"id: point '{point_id}' already exists in project '{pid}'")
+                    raise ConflictError(f"point '{point_id}' already exists in project '{pid}'",
+                                        field="id")
             pt = PointRecord(project_id=pid, id=point_id, rays=rays, code=code,
                              description=description, excluded=excluded)
             self._solve_into(pt, p, strict=True)
@@ -283,7 +285,7 @@ class Projects:
         allowed = {"id", "code", "description", "excluded", "exclude_ray", "restore_ray", "rays"}
         unknown = set(changes) - allowed
         if unknown:
-            raise InputError(f"{sorted(unknown)[0]}: not a point field that can be changed")
+            raise InputError("not a point field that can be changed", field=sorted(unknown)[0])
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
             pt = self._point(tx, pid, point_id)
@@ -300,7 +302,7 @@ class Projects:
             if changes.get("restore_ray") is not None:
                 i = changes["restore_ray"]
                 if i not in excluded:
-                    raise InputError(f"restore_ray: ray {i} is not excluded")
+                    raise InputError(f"ray {i} is not excluded", field="restore_ray")
                 excluded.discard(i)
             if sorted(excluded) != pt.excluded:
                 field = next((k for k in ("exclude_ray", "restore_ray", "excluded")
@@ -315,7 +317,8 @@ class Projects:
             if changes.get("id") is not None:
                 pt.id = item_id(changes["id"], "id")
                 if pt.id != old_id and tx.get_point(pid, pt.id) is not None:
-                    raise ConflictError(f"id: point '{pt.id}' already exists in project '{pid}'")
+                    raise ConflictError(f"point '{pt.id}' already exists in project '{pid}'",
+                                        field="id")
             if resolve or pt.solved_rev != p.settings_rev:
                 self._solve_into(pt, p, strict=True)
             else:
@@ -354,34 +357,34 @@ class Projects:
 
         session = parse_session(doc)
         if not session.points and not session.lines and not session.polygons:
-            raise InputError("points: the session has no points, lines or polygons")
+            raise InputError("the session has no points, lines or polygons", field="points")
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
             for i, sp in enumerate(session.points):
-                where = f"points[{i}]"
-                point_id = item_id(sp.id, f"{where}.id")
+                at = f"points[{i}]"
+                point_id = item_id(sp.id, f"{at}.id")
                 if len(sp.rays) < 2:
-                    raise InputError(f"{where}.rays: a point needs at least two rays")
+                    raise InputError("a point needs at least two rays", field=f"{at}.rays")
                 if tx.get_point(pid, point_id) is not None:
-                    raise ConflictError(f"{where}.id: point '{point_id}' already exists in "
-                                        f"project '{pid}'")
+                    raise ConflictError(f"point '{point_id}' already exists in project '{pid}'",
+                                        field=f"{at}.id")
                 pt = PointRecord(project_id=pid, id=point_id, rays=[r.to_dict() for r in sp.rays],
                                  code=sp.code, description=sp.description)
                 try:
                     self._solve_into(pt, p, strict=True)
                 except GsgeoError as exc:
-                    raise type(exc)(f"{where} ('{point_id}'): {exc}") from None
+                    raise exc.part_of(at, f"point '{point_id}'") from None
                 tx.insert_point(pt)
             for kind, feats in (("line", session.lines), ("polygon", session.polygons)):
                 for i, f in enumerate(feats):
-                    where = f"{kind}s[{i}]"
-                    fid = item_id(f.id, f"{where}.id")
+                    at = f"{kind}s[{i}]"
+                    fid = item_id(f.id, f"{at}.id")
                     try:
                         ids = self._feature_points(tx, pid, kind, f.points)
                     except InputError as exc:
-                        raise InputError(f"{where}.{exc}") from None
+                        raise exc.within(at) from None
                     if tx.get_feature(pid, kind, fid) is not None:
-                        raise ConflictError(f"{where}.id: {kind} '{fid}' already exists")
+                        raise ConflictError(f"{kind} '{fid}' already exists", field=f"{at}.id")
                     tx.insert_feature(FeatureRecord(project_id=pid, kind=kind, id=fid,
                                                     point_ids=ids))
         return {"points": len(session.points), "lines": len(session.lines),
@@ -390,23 +393,26 @@ class Projects:
     # lines and polygons ---------------------------------------------------------------
     def _feature_points(self, tx: Transaction, pid: str, kind: str, ids: Any) -> list[str]:
         if not isinstance(ids, list):
-            raise InputError("points: expected a list of point ids")
+            raise InputError("expected a list of point ids", field="points")
         out = [item_id(v, f"points[{i}]") for i, v in enumerate(ids)]
         closed = kind == "polygon" and len(out) > 1 and out[0] == out[-1]
         if closed:
             out = out[:-1]  # closing vertex given explicitly
         if len(out) < KINDS[kind]:
-            raise InputError(f"points: a {kind} needs at least {KINDS[kind]} points, got {len(out)}"
-                             + (f" ({len(ids)} given, the last closing the ring)" if closed else ""))
+            raise InputError(f"a {kind} needs at least {KINDS[kind]} points, got {len(out)}"
+                             + (f" ({len(ids)} given, the last closing the ring)" if closed else ""),
+                             field="points")
         if len(out) > MAX_FEATURE_POINTS:
-            raise InputError(f"points: more than {MAX_FEATURE_POINTS} points")
+            raise InputError(f"more than {MAX_FEATURE_POINTS} points", field="points")
         for i in range(1, len(out)):
             if out[i] == out[i - 1]:
-                raise InputError(f"points[{i}]: point '{out[i]}' repeats the one before it")
+                raise InputError(f"point '{out[i]}' repeats the one before it",
+                                 field=f"points[{i}]")
         known = set(tx.point_ids(pid))
         for i, q in enumerate(out):
             if q not in known:
-                raise InputError(f"points[{i}]: point '{q}' does not exist in project '{pid}'")
+                raise InputError(f"point '{q}' does not exist in project '{pid}'",
+                                 field=f"points[{i}]")
         return out
 
     def list_features(self, pid: str, kind: str) -> list[tuple[FeatureRecord, dict[str, Any]]]:
@@ -443,7 +449,8 @@ class Projects:
             else:
                 fid = item_id(doc["id"], "id")
                 if tx.get_feature(pid, kind, fid) is not None:
-                    raise ConflictError(f"id: {kind} '{fid}' already exists in project '{pid}'")
+                    raise ConflictError(f"{kind} '{fid}' already exists in project '{pid}'",
+                                        field="id")
             f = FeatureRecord(project_id=pid, kind=kind, id=fid, point_ids=ids,
                               code=_text(doc.get("code"), "code", 200),
                               description=_text(doc.get("description"), "description"))
@@ -453,7 +460,7 @@ class Projects:
     def update_feature(self, pid: str, kind: str, fid: str, changes: dict[str, Any]) -> FeatureRecord:
         unknown = set(changes) - {"id", "points", "code", "description"}
         if unknown:
-            raise InputError(f"{sorted(unknown)[0]}: not a {kind} field that can be changed")
+            raise InputError(f"not a {kind} field that can be changed", field=sorted(unknown)[0])
         with self.store.transaction() as tx:
             f = self._feature(tx, pid, kind, fid)
             if changes.get("points") is not None:
@@ -466,7 +473,8 @@ class Projects:
             if changes.get("id") is not None:
                 f.id = item_id(changes["id"], "id")
                 if f.id != old and tx.get_feature(pid, kind, f.id) is not None:
-                    raise ConflictError(f"id: {kind} '{f.id}' already exists in project '{pid}'")
+                    raise ConflictError(f"{kind} '{f.id}' already exists in project '{pid}'",
+                                        field="id")
             tx.update_feature(f, old_id=old)
             return f
 
@@ -487,11 +495,11 @@ class Projects:
         from gsgeo.crs.resolve import parse_crs
 
         if role not in ("check", "control"):
-            raise InputError("role: must be 'check' or 'control'")
+            raise InputError("must be 'check' or 'control'", field="role")
         try:
             parse_crs(crs)
         except CRSError as exc:
-            raise CRSError(f"crs: {exc}") from None
+            raise exc.within("crs") from None
         recs = [CheckPointRecord(project_id=pid, id=r.id, x=r.x, y=r.y, z=r.z, crs=crs.strip(),
                                  role=role, source=_text(source, "source", 300)) for r in rows]
         with self.store.transaction() as tx:
@@ -519,8 +527,8 @@ class Projects:
             pts = tx.list_points(pid)
             cps = [c for c in tx.list_check_points(pid) if c.role == role]
         if p.crs is None:
-            raise InputError(f"crs: project '{pid}' has no grid CRS; set one to compare with "
-                             "check points")
+            raise InputError(f"project '{pid}' has no grid CRS; set one to compare with "
+                             "check points", field="crs")
         solved = {q.id: q.record for q in pts if q.record is not None
                   and q.record.get("easting") is not None}
         matched = [c for c in cps if c.id in solved]

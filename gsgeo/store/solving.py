@@ -25,23 +25,21 @@ def json_ready(value: Any) -> Any:
 
 def session_point(point_id: str, rays: list[dict], code: str = "", description: str = "") -> SessionPoint:
     """Validate rays (session-JSON dicts) into a SessionPoint; errors name ``rays[i].field``."""
-    try:
-        return parse_point({"id": point_id, "code": code, "description": description,
-                            "rays": rays}, "point")
-    except InputError as exc:
-        msg = str(exc)
-        raise InputError(msg[len("point."):] if msg.startswith("point.") else msg) from None
+    return parse_point({"id": point_id, "code": code, "description": description,
+                        "rays": rays}, field="")
 
 
-def check_excluded(excluded: list[int], n_rays: int, where: str = "excluded") -> list[int]:
+def check_excluded(excluded: list[int], n_rays: int, field: str = "excluded") -> list[int]:
+    """Sorted distinct 0-based indices of excluded rays; InputError (about ``field``) for an
+    index out of range or fewer than two rays left."""
     out = sorted({int(i) for i in excluded})
     for i in out:
         if not 0 <= i < n_rays:
-            raise InputError(f"{where}: ray index {i} is out of range (the point has {n_rays} "
-                             f"rays, indices 0 to {n_rays - 1})")
+            raise InputError(f"ray index {i} is out of range (the point has {n_rays} rays, "
+                             f"indices 0 to {n_rays - 1})", field=field)
     if n_rays - len(out) < 2:
-        raise InputError(f"{where}: at least two rays must remain in the solution "
-                         f"({n_rays} rays, {len(out)} excluded)")
+        raise InputError(f"at least two rays must remain in the solution ({n_rays} rays, "
+                         f"{len(out)} excluded)", field=field)
     return out
 
 
@@ -50,11 +48,12 @@ def resolve_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
     if not geoid:
         return None
     if data_dir is None:
-        raise CRSError("geoid: no data directory to look up geoid grids in")
+        raise CRSError("no data directory to look up geoid grids in", field="geoid")
     gdir = (Path(data_dir) / "geoids").resolve()
     path = (gdir / geoid).resolve()
     if path.parent != gdir or not path.is_file():
-        raise CRSError(f"geoid: no geoid grid '{geoid}' in {gdir} (put the GeoTIFF there)")
+        raise CRSError(f"no geoid grid '{geoid}' in {gdir} (put the GeoTIFF there)",
+                       field="geoid")
     return path
 
 

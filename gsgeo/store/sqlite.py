@@ -247,7 +247,8 @@ class SQLiteStore(Store):
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise StoreError(f"{self.path.parent}: cannot create the data directory: {exc}") from None
+            raise StoreError(f"cannot create the data directory: {exc}",
+                             source=str(self.path.parent)) from None
         self._local = threading.local()
         self._connections: list[sqlite3.Connection] = []
         self._lock = threading.Lock()
@@ -264,12 +265,13 @@ class SQLiteStore(Store):
             con.row_factory = sqlite3.Row
             mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
             if mode.lower() != "wal":
-                raise StoreError(f"{self.path}: cannot switch to WAL journal mode (got {mode})")
+                raise StoreError(f"cannot switch to WAL journal mode (got {mode})",
+                                 source=str(self.path))
             con.execute("PRAGMA synchronous=FULL")
             con.execute("PRAGMA foreign_keys=ON")
             con.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
         except sqlite3.DatabaseError as exc:
-            raise StoreError(f"{self.path}: cannot open as a gsgeo store: {exc}") from None
+            raise StoreError(f"cannot open as a gsgeo store: {exc}", source=str(self.path)) from None
         self._local.con = con
         self._local.depth = 0
         with self._lock:
@@ -303,7 +305,7 @@ class SQLiteStore(Store):
                         con.execute("ROLLBACK")
                     raise
         except sqlite3.DatabaseError as exc:
-            raise StoreError(f"{self.path}: cannot open as a gsgeo store: {exc}") from None
+            raise StoreError(f"cannot open as a gsgeo store: {exc}", source=str(self.path)) from None
 
     @property
     def schema_version(self) -> int:

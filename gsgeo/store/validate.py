@@ -16,25 +16,26 @@ MAX_ID_LEN = 100
 _BAD_ID_CHARS = re.compile(r"[/\\]")
 
 
-def slug(value: Any, where: str) -> str:
+def slug(value: Any, field: str) -> str:
+    """A project or scene id (SLUG), or InputError about ``field``."""
     if not isinstance(value, str) or not SLUG.match(value):
-        raise InputError(f"{where}: must be 1-64 characters of letters, digits, '_', '.', '-' "
-                         f"starting with a letter or digit, got {str(value)[:70]!r}")
+        raise InputError("must be 1-64 characters of letters, digits, '_', '.', '-' starting "
+                         f"with a letter or digit, got {str(value)[:70]!r}", field=field)
     return value
 
 
-def item_id(value: Any, where: str) -> str:
+def item_id(value: Any, field: str) -> str:
     """A point, line, polygon or check point id, stripped of surrounding blanks; InputError
     for a control character (checked before stripping), '/', '\\', '.', '..', or more than
     MAX_ID_LEN characters."""
-    v = limits.id_text(value, where).strip()
+    v = limits.id_text(value, field).strip()
     if len(v) > MAX_ID_LEN:
-        raise InputError(f"{where}: longer than {MAX_ID_LEN} characters")
+        raise InputError(f"longer than {MAX_ID_LEN} characters", field=field)
     if _BAD_ID_CHARS.search(v) or v in (".", ".."):
-        raise InputError(f"{where}: must not contain '/' or '\\' nor be '.' or '..'")
+        raise InputError("must not contain '/' or '\\' nor be '.' or '..'", field=field)
     return v
 
 
-def sigma_px(value: Any, where: str = "sigma_px") -> float:
+def sigma_px(value: Any, field: str = "sigma_px") -> float:
     """The aiming precision in pixels within gsgeo.limits' range (SIGMA_PX_MIN..SIGMA_PX_MAX)."""
-    return limits.sigma_px(value, where)
+    return limits.sigma_px(value, field)
