@@ -1,6 +1,8 @@
 """The web client's pure JavaScript (web/js/linalg.js, web/js/rays.js) run in Node.js and
 checked against numpy: the eigen-decomposition that orients and sizes the error ellipsoid,
-covariance propagation through a model matrix, and the angular size of a pixel."""
+covariance propagation through a model matrix, and the angular size of a pixel; and the
+measuring tools' registry (web/js/tools/): every tool keeps the interface, switching follows
+the workplace's rules."""
 
 from __future__ import annotations
 
@@ -85,3 +87,94 @@ def test_pixel_angle_is_sqrt_of_pixel_solid_angle():
         omega = _solid_angle(c[0], c[1], c[2]) + _solid_angle(c[0], c[2], c[3])
         assert g == pytest.approx(np.sqrt(omega), rel=1e-5)
     assert got[0] == pytest.approx(2 * np.tan(fovy / 2) / h, rel=1e-12)
+
+
+#: Browser globals the client's modules touch when they are imported or a tool starts:
+#: a Cesium stub (colours only), an empty location and session storage, and a document whose
+#: elements (one per selector) record hidden, textContent, value and classes.
+BROWSER_STUB = """
+const el = () => ({ hidden: true, textContent: "", value: "", dataset: {}, disabled: false,
+  classes: new Set(), addEventListener() {}, blur() {},
+  get classList() { const c = this.classes; return { add: (x) => c.add(x), remove: (x) => c.delete(x),
+    toggle: (x, on) => (on ? c.add(x) : c.delete(x)), contains: (x) => c.has(x) }; } });
+const elements = new Map();
+const byKey = (k) => { if (!elements.has(k)) elements.set(k, el()); return elements.get(k); };
+const color = (css) => ({ css, toCssColorString: () => css, withAlpha() { return this; } });
+globalThis.Cesium = { Color: { fromCssColorString: color, TRANSPARENT: color("transparent") } };
+globalThis.window = globalThis;
+globalThis.location = { hash: "", pathname: "/", search: "", port: "", protocol: "http:" };
+globalThis.sessionStorage = { getItem: () => null, setItem() {} };
+globalThis.document = { querySelector: (s) => byKey(s), getElementById: (id) => byKey("#" + id),
+  cookie: "" };
+"""
+
+
+def run_tools_js(body: str) -> object:
+    """Run `body` with the tool registry imported as T (web/js/tools/index.js) and a fake
+    workplace context `ctx` whose messages are collected in `messages`."""
+    src = (BROWSER_STUB
+           + f"const T = await import('{(WEB_JS / 'tools' / 'index.js').as_uri()}');\n"
+           + """const messages = [];
+const state = { mode: "idle", project: null, points: [], measure: null, feature: null };
+const ctx = { state, message: (text) => messages.push(text), updateStatus() {},
+  draw: { clear() {}, path() {} }, modelMatrix: () => null, pointById: () => null,
+  done: () => T.release(ctx) };
+""" + body)
+    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+def test_every_tool_implements_the_interface():
+    """docs/architecture.md, "Web client": a tool is an object with a unique id and shortcut
+    (not a key the workplace itself uses: E, H, ?), status(ctx), and, unless it is the
+    default tool, start and cancel; the optional members are functions."""
+    got = run_tools_js("""
+const optional = ["setup", "click", "pick", "key", "undo", "finish", "leave", "redraw"];
+console.log(JSON.stringify(T.TOOLS.map((t) => ({
+  id: t.id, shortcut: t.shortcut ?? null, status: typeof t.status, start: typeof t.start,
+  cancel: typeof t.cancel, badOptional: optional.filter((k) => k in t && typeof t[k] !== "function"),
+  byShortcut: t.shortcut ? T.toolByShortcut(t.shortcut.toLowerCase()).id : null,
+}))));""")
+    assert [t["id"] for t in got][:1] == ["idle"]
+    assert {t["id"]: t["shortcut"] for t in got}.items() >= {"measure": "M", "line": "L",
+                                                              "polygon": "P"}.items()
+    ids = [t["id"] for t in got]
+    shortcuts = [t["shortcut"] for t in got if t["shortcut"]]
+    assert len(set(ids)) == len(ids) and len(set(shortcuts)) == len(shortcuts)
+    for t in got:
+        assert t["status"] == "function" and t["badOptional"] == [], t
+        if t["id"] != "idle":
+            assert t["start"] == "function" and t["cancel"] == "function", t
+        if t["shortcut"]:
+            assert len(t["shortcut"]) == 1 and t["shortcut"].upper() not in "EH?", t
+            assert t["byShortcut"] == t["id"]
+
+
+def test_tool_switching_rules():
+    """Line and polygon need a project; a point being measured must be finished or
+    cancelled before another tool starts (M again does nothing); starting a tool cancels
+    a line or polygon in progress, and only the active tool's button is marked."""
+    got = run_tools_js("""
+const r = {};
+r.noProject = [T.activate(ctx, "line"), state.mode, messages.splice(0)];
+state.project = { id: "p" };
+r.line = [T.activate(ctx, "line"), state.mode, state.feature && state.feature.kind,
+          document.getElementById("btn-line").classList.contains("active")];
+r.polygon = [T.activate(ctx, "polygon"), state.mode, state.feature.kind,
+             document.getElementById("btn-line").classList.contains("active"),
+             document.getElementById("btn-polygon").classList.contains("active")];
+T.activeTool(state).cancel(ctx);
+r.cancelled = [state.mode, state.feature,
+               document.getElementById("btn-polygon").classList.contains("active")];
+state.mode = "measure";
+r.whileMeasuring = [T.activate(ctx, "polygon"), state.mode, messages.splice(0),
+                    T.activate(ctx, "measure"), messages.splice(0)];
+console.log(JSON.stringify(r));""")
+    assert got["noProject"] == [False, "idle", ["Open a project first."]]
+    assert got["line"] == [True, "line", "line", True]
+    assert got["polygon"] == [True, "polygon", "polygon", False, True]
+    assert got["cancelled"] == ["idle", None, False]
+    assert got["whileMeasuring"] == [False, "measure", ["Finish or cancel the point first (Enter / Esc)."],
+                                     False, []]

@@ -23,6 +23,21 @@ export function area(x) {
   return Math.abs(x) < 1e5 ? `${x.toFixed(3)} m²` : `${(x / 1e4).toFixed(4)} ha`;
 }
 
+/** The measures of a line or polygon as the server gives them (lengths in m, areas in m²),
+ *  each with its sigma: "length 3d 5.000 m ± 1.2 mm, ...". */
+export function measuresText(ms) {
+  if (!ms) return "—";
+  if (ms.error) return ms.error;
+  const parts = [];
+  for (const [k, v] of Object.entries(ms)) {
+    if (typeof v !== "number" || k.startsWith("sigma") || k === "n_points") continue;
+    const sig = ms[`sigma_${k}`];
+    const val = k.includes("area") ? area(v) : (/length|perimeter/.test(k) ? length(v) : fixed(v));
+    parts.push(`${k.replace(/_/g, " ")} ${val}${typeof sig === "number" ? ` ± ${k.includes("area") ? area(sig) : length(sig)}` : ""}`);
+  }
+  return parts.join(", ") || "—";
+}
+
 export function escapeHtml(s) {
   return String(s ?? "").replace(/[&<>"']/g, (c) => ({
     "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;",

@@ -4,7 +4,7 @@
 import { api, download, ApiError } from "./api.js";
 import { Drawer, COLORS, SCALE_95_3D, cart } from "./draw.js";
 import { applyPoint, applyDirection, norm, sub, IDENTITY16 } from "./linalg.js";
-import { $, fixed, mm, length, area, h } from "./format.js";
+import { $, fixed, mm, h, measuresText } from "./format.js";
 import { TOOLS, activeTool, activate, handlerOf, release, toolByShortcut } from "./tools/index.js";
 
 const Cesium = window.Cesium;
@@ -25,7 +25,7 @@ const state = {
   selected: null, // point id
   mode: "idle", // the active tool's id (tools/index.js): idle | measure | line | polygon
   measure: null, // the measure tool's point: {rays, excluded:Set, editing, pointId, solution, error, seq}
-  feature: null, // {kind, points: []}
+  feature: null, // the line or polygon tool's draft: {kind, points: []}
   conf: "95",
 };
 
@@ -85,21 +85,8 @@ function fail(exc) {
 
 function updateStatus() {
   const el = $("#status");
-  el.className = "";
-  let text;
-  if (state.mode === "line" || state.mode === "polygon") {
-    const f = state.feature;
-    const need = f.kind === "line" ? 2 : 3;
-    el.className = "picking";
-    text = `New ${f.kind}: click a measured point in the scene or the list (${f.points.length} picked`
-      + `${f.points.length ? ": " + f.points.join(" → ") : ""}). `
-      + (f.points.length >= need ? "Enter stores it. " : `Needs ${need} points. `)
-      + "Backspace removes the last, Esc cancels.";
-  } else {
-    const status = activeTool(state).status(ctx);
-    text = status.text;
-    el.className = status.className;
-  }
+  const { text, className } = activeTool(state).status(ctx);
+  el.className = className;
   el.textContent = text;
 }
 
@@ -351,12 +338,11 @@ const ctx = {
     state.points = [...state.points.filter((q) => q.id !== pt.id), pt];
     await refreshProjectData();
   },
+  /** The server's answer to storing line or polygon `f` goes into the state. */
+  featureStored: async () => {
+    await refreshProjectData();
+  },
 };
-
-function startMeasure(editPoint = null) {
-  if (state.mode === "line" || state.mode === "polygon") cancelFeature();
-  activate(ctx, "measure", editPoint);
-}
 
 // ---------------------------------------------------------------------------------------
 // points
@@ -390,7 +376,6 @@ function renderPoints() {
 }
 
 function onPointRowClick(id) {
-  if (state.mode === "line" || state.mode === "polygon") { pickFeaturePoint(id); return; }
   handlerOf(state, "pick").pick(ctx, id);
 }
 
@@ -471,7 +456,7 @@ function renderPointDetail() {
     rays.length ? h("table", { class: "grid" }, h("thead", {}, h("tr", {}, h("th", {}, "Ray"), h("th", {}, "res px"), h("th", {}, "res mm"), h("th", {}, ""))), h("tbody", {}, ...rays)) : "",
     h("div", { class: "buttons" },
       h("button", { onclick: () => selectPoint(p.id, true) }, "Fly to"),
-      h("button", { onclick: () => startMeasure(p), title: "reopen: add rays to this point" }, "Add rays"),
+      h("button", { onclick: () => activate(ctx, "measure", p), title: "reopen: add rays to this point" }, "Add rays"),
       delBtn));
 }
 
@@ -509,76 +494,6 @@ function drawSelected() {
 
 // ---------------------------------------------------------------------------------------
 // lines and polygons
-
-function startFeature(kind) {
-  if (!state.project) { message("Open a project first.", true); return; }
-  if (state.mode === "measure") { message("Finish or cancel the point first (Enter / Esc).", true); return; }
-  state.mode = kind;
-  state.feature = { kind, points: [] };
-  $("#feature-panel").hidden = false;
-  $("#feature-title").textContent = `New ${kind}`;
-  $("#feat-code").value = "";
-  $(kind === "line" ? "#btn-line" : "#btn-polygon").classList.add("active");
-  renderFeatureDraft();
-  updateStatus();
-}
-
-function cancelFeature() {
-  state.mode = "idle";
-  state.feature = null;
-  $("#feature-panel").hidden = true;
-  $("#btn-line").classList.remove("active");
-  $("#btn-polygon").classList.remove("active");
-  draw.clear("draft");
-  updateStatus();
-}
-
-function pickFeaturePoint(id) {
-  const f = state.feature;
-  const p = pointById(id);
-  if (!p || !p.result) { message(`${id} has no solved position.`, true); return; }
-  if (f.points[f.points.length - 1] === id) return;
-  if (f.kind === "polygon" && f.points.includes(id)) { message(`${id} is already a vertex.`); return; }
-  f.points.push(id);
-  renderFeatureDraft();
-  updateStatus();
-}
-
-function renderFeatureDraft() {
-  const f = state.feature;
-  $("#feature-points").textContent = f.points.length ? f.points.join(" → ") : "click measured points…";
-  draw.clear("draft");
-  const mmNow = modelMatrix();
-  const pos = f.points.map((id) => applyPoint(mmNow, pointById(id).result.point_ecef));
-  draw.path("draft", pos, COLORS.draft, f.kind === "polygon", 2);
-}
-
-async function finishFeature() {
-  const f = state.feature;
-  const need = f.kind === "line" ? 2 : 3;
-  if (f.points.length < need) { message(`A ${f.kind} needs at least ${need} points.`, true); return; }
-  const plural = f.kind === "line" ? "lines" : "polygons";
-  try {
-    const made = await api("POST", `/projects/${encodeURIComponent(state.project.id)}/${plural}`,
-      { points: f.points, code: $("#feat-code").value.trim() });
-    cancelFeature();
-    await refreshProjectData();
-    message(`Stored ${f.kind} ${made.id}: ${measuresText(made.measures)}`);
-  } catch (exc) { fail(exc); }
-}
-
-function measuresText(ms) {
-  if (!ms) return "—";
-  if (ms.error) return ms.error;
-  const parts = [];
-  for (const [k, v] of Object.entries(ms)) {
-    if (typeof v !== "number" || k.startsWith("sigma") || k === "n_points") continue;
-    const sig = ms[`sigma_${k}`];
-    const val = k.includes("area") ? area(v) : (/length|perimeter/.test(k) ? length(v) : fixed(v));
-    parts.push(`${k.replace(/_/g, " ")} ${val}${typeof sig === "number" ? ` ± ${k.includes("area") ? area(sig) : length(sig)}` : ""}`);
-  }
-  return parts.join(", ") || "—";
-}
 
 async function deleteFeature(kind, id) {
   const plural = kind === "line" ? "lines" : "polygons";
@@ -698,7 +613,6 @@ function redrawAll() {
   drawFeatures();
   const tool = activeTool(state);
   if (tool.redraw) tool.redraw(ctx);
-  if (state.feature) renderFeatureDraft();
 }
 
 let lastModelMatrix = IDENTITY16.slice();
@@ -735,12 +649,6 @@ function nearestPoint(windowPosition, tol) {
 
 const clicks = new Cesium.ScreenSpaceEventHandler(viewer.scene.canvas);
 clicks.setInputAction((ev) => {
-  if (state.mode === "line" || state.mode === "polygon") {
-    const id = nearestPoint(ev.position, 14);
-    if (id) pickFeaturePoint(id);
-    else message("Click on a point marker (or a row of the points list).");
-    return;
-  }
   handlerOf(state, "click").click(ctx, ev);
 }, Cesium.ScreenSpaceEventType.LEFT_CLICK);
 
@@ -769,17 +677,8 @@ document.addEventListener("keydown", (ev) => {
   if (tool.key && tool.key(ctx, ev)) { ev.preventDefault(); return; }
   const action = { Enter: "finish", Escape: "cancel", Backspace: "undo" }[key];
   if (action && tool[action]) { tool[action](ctx, ev); ev.preventDefault(); return; }
-  if (state.mode === "line" || state.mode === "polygon") {
-    if (key === "Enter") { finishFeature(); ev.preventDefault(); return; }
-    if (key === "Escape") { cancelFeature(); ev.preventDefault(); return; }
-    if (key === "Backspace") {
-      state.feature.points.pop(); renderFeatureDraft(); updateStatus(); ev.preventDefault(); return;
-    }
-  }
   const shortcut = toolByShortcut(key);
-  if (shortcut) { startTool(shortcut.id); ev.preventDefault(); }
-  else if (key === "l" || key === "L") { startFeature("line"); ev.preventDefault(); }
-  else if (key === "p" || key === "P") { startFeature("polygon"); ev.preventDefault(); }
+  if (shortcut) { activate(ctx, shortcut.id); ev.preventDefault(); }
   else if (key === "e" || key === "E") { setConf(state.conf === "95" ? "1" : "95"); ev.preventDefault(); }
   else if (key === "?" || key === "h" || key === "H") { toggleHelp(true); ev.preventDefault(); }
   else if (key === "Escape" && state.selected) { selectPoint(null, false); }
@@ -791,29 +690,27 @@ function setConf(value) {
   redrawAll();
 }
 
-/** Start a tool by its key or button. */
-function startTool(id, arg) {
-  if (id === "measure") startMeasure(arg);
-  else activate(ctx, id, arg);
+/** A toolbar button (id btn-<tool id>) for every tool with a label, in the registry's order. */
+function toolButtons() {
+  const bar = $("#tools");
+  for (const tool of TOOLS) {
+    if (!tool.label) continue;
+    const button = h("button", { id: `btn-${tool.id}`, class: tool.primary ? "primary" : "", title: tool.title },
+      `${tool.label} `, tool.shortcut ? h("kbd", {}, tool.shortcut) : "");
+    button.addEventListener("click", () => { activate(ctx, tool.id); button.blur(); });
+    bar.insertBefore(button, bar.querySelector(".conf"));
+  }
 }
 
 function wire() {
-  for (const tool of TOOLS) {
-    const button = document.getElementById(`btn-${tool.id}`);
-    if (button) button.addEventListener("click", () => { startTool(tool.id); button.blur(); });
-    if (tool.setup) tool.setup(ctx);
-  }
+  toolButtons();
+  for (const tool of TOOLS) if (tool.setup) tool.setup(ctx);
   // the panels' Finish / Undo / Cancel buttons act on the active tool
   document.querySelectorAll("[data-tool-action]").forEach((b) => b.addEventListener("click", () => {
     const tool = activeTool(state);
     const action = b.dataset.toolAction;
     if (tool[action]) tool[action](ctx);
   }));
-  $("#btn-line").addEventListener("click", () => { startFeature("line"); $("#btn-line").blur(); });
-  $("#btn-polygon").addEventListener("click", () => { startFeature("polygon"); $("#btn-polygon").blur(); });
-  $("#btn-feat-finish").addEventListener("click", () => finishFeature());
-  $("#btn-feat-undo").addEventListener("click", () => { state.feature.points.pop(); renderFeatureDraft(); updateStatus(); });
-  $("#btn-feat-cancel").addEventListener("click", () => cancelFeature());
   $("#btn-help").addEventListener("click", () => toggleHelp(true));
   $("#btn-help-close").addEventListener("click", () => toggleHelp(false));
   $("#help").addEventListener("click", (ev) => { if (ev.target.id === "help") toggleHelp(false); });

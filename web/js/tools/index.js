@@ -3,12 +3,16 @@
 // The interface is described in docs/architecture.md ("Web client").
 
 import idle from "./idle.js";
+import line from "./line.js";
 import measure from "./measure.js";
+import polygon from "./polygon.js";
 
 /** Every tool; the first is the default (selection) tool. Toolbar buttons follow this order. */
 export const TOOLS = [
   idle,
   measure,
+  line,
+  polygon,
 ];
 
 export const DEFAULT_TOOL = TOOLS[0];
