@@ -6,6 +6,11 @@ a single ellipsoid, with no datum change, so they are used where the frame is WG
 georeference options of ``gsgeo tiles``. Importing this module does not load PROJ (about
 0.1 s at start). Anything datum-aware goes through :mod:`gsgeo.crs.frames` and PROJ.
 
+Names: the closed-form conversions here are ``geodetic_to_ecef_closed_form`` and
+``ecef_to_geodetic_closed_form`` (WGS 84 unless another a, f is given); the PROJ ones, on
+any geocentric source CRS's datum, are :func:`gsgeo.crs.frames.geodetic_to_ecef` and
+:func:`gsgeo.crs.frames.ecef_to_geodetic`. Longitude before latitude everywhere.
+
 Degrees for latitude and longitude, metres for heights and coordinates.
 """
 
@@ -35,7 +40,7 @@ def enu_rotation(lon_deg, lat_deg) -> np.ndarray:
     ], axis=-2)
 
 
-def geodetic_to_ecef(lon, lat, h, a: float = WGS84_A, f: float = WGS84_F) -> np.ndarray:
+def geodetic_to_ecef_closed_form(lon, lat, h, a: float = WGS84_A, f: float = WGS84_F) -> np.ndarray:
     """ECEF (..., 3) in metres of longitude, latitude (degrees) and ellipsoidal height (m)."""
     lam = np.radians(np.asarray(lon, dtype=np.float64))
     phi = np.radians(np.asarray(lat, dtype=np.float64))
@@ -47,7 +52,7 @@ def geodetic_to_ecef(lon, lat, h, a: float = WGS84_A, f: float = WGS84_F) -> np.
                      (n * (1.0 - e2) + h) * sp], axis=-1)
 
 
-def ecef_to_geodetic(xyz, a: float = WGS84_A, f: float = WGS84_F
+def ecef_to_geodetic_closed_form(xyz, a: float = WGS84_A, f: float = WGS84_F
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Longitude, latitude (degrees) and ellipsoidal height (m) of ECEF points (..., 3).
 

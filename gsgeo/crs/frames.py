@@ -5,7 +5,12 @@ latitude and longitude of the origin on the source CRS's ellipsoid. Points go th
 (``+proj=topocentric``), direction vectors and covariances through the rotation alone
 (rows east = [-sin lon, cos lon, 0], north = [-sin lat cos lon, -sin lat sin lon, cos lat],
 up = [cos lat cos lon, cos lat sin lon, sin lat]). Metres and radians inside; degrees at
-the interface.
+the interface, longitude before latitude.
+
+``geodetic_to_ecef`` / ``ecef_to_geodetic`` here go through PROJ on the source CRS's datum;
+the closed-form WGS 84 formulas that need no PROJ are
+:func:`gsgeo.crs.ellipsoid.geodetic_to_ecef_closed_form` and
+:func:`gsgeo.crs.ellipsoid.ecef_to_geodetic_closed_form`.
 """
 
 from __future__ import annotations

@@ -46,6 +46,7 @@ from gsgeo.crs.transformers import (
     choose,
     in_area,
     is_ballpark,
+    projection,
     transform_xy,
     transformer,
 )
@@ -291,13 +292,11 @@ def analytic_jacobian(points_ecef, crs: str, source_crs: str = "EPSG:4978") -> n
     A datum transformation's own scale and rotation (a few 1e-5 for a Helmert) are not in it.
     Independent of the numerical path in `to_grid`; the tests use it to check that path.
     """
-    from pyproj import Proj
-
     src = _source(source_crs)
     g = grid_crs(crs)
     pts = np.asarray(points_ecef, dtype=np.float64).reshape(-1, 3)
     lon, lat, h = ecef_to_geodetic(pts, src.id)
-    fac = Proj(g.horizontal).get_factors(lon, lat, errcheck=True)
+    fac = projection(g.horizontal).get_factors(lon, lat, errcheck=True)
     k = np.asarray(fac.meridional_scale)  # = parallel scale for a conformal projection
     kp = np.asarray(fac.parallel_scale)
     gam = np.radians(np.asarray(fac.meridian_convergence))

@@ -29,24 +29,44 @@ def disable_network() -> None:
 disable_network()
 
 
-@functools.lru_cache(maxsize=256)
-def parse_crs(text: str) -> CRS:
-    """A pyproj CRS from user text ("EPSG:27700", "27700", "EPSG:27700+5701", WKT, PROJ JSON).
+def parse_crs(crs: object) -> CRS:
+    """A pyproj CRS from anything pyproj accepts: a :class:`pyproj.CRS` (returned as it is),
+    an EPSG code as an int (27700) or digits ("27700"), user text ("EPSG:27700",
+    "EPSG:27700+5701", WKT, a PROJ string, PROJ JSON) or a PROJ JSON dict.
 
-    Raises CRSError naming the text when PROJ does not know it.
+    Text and codes are parsed once (cached). Raises CRSError naming the input when PROJ does
+    not know it.
     """
-    if not isinstance(text, str) or not text.strip():
+    if isinstance(crs, CRS):
+        return crs
+    if isinstance(crs, int) and not isinstance(crs, bool):
+        return _parse_text(f"EPSG:{crs}")
+    if isinstance(crs, str):
+        if not crs.strip():
+            raise CRSError("a CRS must be given as text such as EPSG:27700")
+        return _parse_text(crs)
+    if crs is None or isinstance(crs, bool | float):
         raise CRSError("a CRS must be given as text such as EPSG:27700")
+    try:
+        return CRS.from_user_input(crs)
+    except (ProjCRSError, TypeError, ValueError):
+        raise CRSError(_unknown(str(crs))) from None
+
+
+def _unknown(text: str) -> str:
+    return (f"unknown CRS '{text}': PROJ does not know it; give an authority code such as "
+            "EPSG:27700 (try `gsgeo crs search NAME`)")
+
+
+@functools.lru_cache(maxsize=256)
+def _parse_text(text: str) -> CRS:
     s = text.strip()
     if s.isdigit():
         s = f"EPSG:{s}"
     try:
         return CRS.from_user_input(s)
     except ProjCRSError:
-        raise CRSError(
-            f"unknown CRS '{text}': PROJ does not know it; give an authority code such as "
-            "EPSG:27700 (try `gsgeo crs search NAME`)"
-        ) from None
+        raise CRSError(_unknown(text)) from None
 
 
 def crs_id(crs: CRS, fallback: str | None = None) -> str:

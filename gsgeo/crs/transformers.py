@@ -1,7 +1,8 @@
-"""Cached PROJ transformers and the choice of operation.
+"""The one factory of PROJ transformers (cached) and the choice of operation.
 
-A Transformer is built once per (source, target, PROJ data directory) and reused for every
-point (``functools.lru_cache``); gsgeo never builds one per point. Operations are chosen
+Every pyproj Transformer, TransformerGroup and Proj of gsgeo is built here. A Transformer is
+built once per (source, target, PROJ data directory) and reused for every point
+(``functools.lru_cache``); gsgeo never builds one per point. Operations are chosen
 explicitly from PROJ's ranked candidates (`TransformerGroup`) so that the operation used is
 known before transforming and recorded with each result.
 
@@ -32,14 +33,26 @@ def _datadir() -> str:
     return pyproj.datadir.get_data_dir()
 
 
+def crs_key(crs: object) -> str:
+    """The text a CRS is cached under: text as given, "EPSG:n" for an int, else its WKT."""
+    if isinstance(crs, str):
+        return crs
+    if isinstance(crs, int) and not isinstance(crs, bool):
+        return f"EPSG:{crs}"
+    return parse_crs(crs).to_wkt()
+
+
 @functools.lru_cache(maxsize=128)
-def _transformer(src: str, dst: str, datadir: str) -> Transformer:
-    return Transformer.from_crs(parse_crs(src), parse_crs(dst), always_xy=True)
+def _transformer(src: str, dst: str, allow_ballpark: bool, datadir: str) -> Transformer:
+    return Transformer.from_crs(parse_crs(src), parse_crs(dst), always_xy=True,
+                                allow_ballpark=allow_ballpark)
 
 
-def transformer(src: str, dst: str) -> Transformer:
-    """A cached, always_xy Transformer between two CRSs given as text (PROJ's own choice)."""
-    return _transformer(src, dst, _datadir())
+def transformer(src: object, dst: object, *, allow_ballpark: bool = True) -> Transformer:
+    """A cached, always_xy Transformer between two CRSs (anything :func:`parse_crs` takes),
+    PROJ's own choice of operation. With ``allow_ballpark=False`` PROJ raises ProjError
+    rather than fall back to a ballpark operation (e.g. a missing geoid grid)."""
+    return _transformer(crs_key(src), crs_key(dst), allow_ballpark, _datadir())
 
 
 @functools.lru_cache(maxsize=128)
@@ -50,6 +63,16 @@ def _pipeline(definition: str, datadir: str) -> Transformer:
 def pipeline(definition: str) -> Transformer:
     """A cached Transformer from a PROJ pipeline string."""
     return _pipeline(definition, _datadir())
+
+
+@functools.lru_cache(maxsize=32)
+def _projection(crs: str, datadir: str) -> pyproj.Proj:
+    return pyproj.Proj(parse_crs(crs))
+
+
+def projection(crs: object) -> pyproj.Proj:
+    """A cached pyproj Proj of a projected CRS (for ``get_factors``: convergence, scale)."""
+    return _projection(crs_key(crs), _datadir())
 
 
 @dataclass(frozen=True)
@@ -71,11 +94,13 @@ _local = threading.local()
 BUILDS: Counter = Counter()
 
 
-def candidates(src: str, dst: str) -> Candidates:
-    """Cached TransformerGroup candidates (best first) between two CRSs given as text."""
+def candidates(src: object, dst: object) -> Candidates:
+    """Cached TransformerGroup candidates (best first) between two CRSs (anything
+    :func:`parse_crs` takes)."""
     cache = getattr(_local, "groups", None)
     if cache is None:
         cache = _local.groups = {}
+    src, dst = crs_key(src), crs_key(dst)
     key = (src, dst, _datadir())
     found = cache.get(key)
     if found is None:

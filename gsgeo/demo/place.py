@@ -17,9 +17,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pyproj
 
-from gsgeo.crs import resolve as _resolve  # noqa: F401  (PROJ off the network before any use)
+from gsgeo.crs.resolve import parse_crs
+from gsgeo.crs.transformers import transformer
 from gsgeo.demo import scene
 
 #: National grid of the demo (British National Grid, OSGB36).
@@ -48,10 +48,9 @@ class TruthPoint:
 def local_to_ecef(local: np.ndarray) -> np.ndarray:
     """Scene-frame points (N, 3) -> ECEF (N, 3) through the grid path of ``gsgeo tiles --crs``."""
     local = np.atleast_2d(np.asarray(local, np.float64))
-    grid = pyproj.CRS.from_user_input(CRS)
-    geog3d = grid.geodetic_crs.to_3d()
-    inv = pyproj.Transformer.from_crs(grid, grid.geodetic_crs, always_xy=True)
-    to_ecef = pyproj.Transformer.from_crs(geog3d, "EPSG:4978", always_xy=True)
+    grid = parse_crs(CRS)
+    inv = transformer(grid, grid.geodetic_crs)
+    to_ecef = transformer(grid.geodetic_crs.to_3d(), "EPSG:4978")
     lon, lat = inv.transform(local[:, 0] + OFFSET[0], local[:, 1] + OFFSET[1])
     x, y, z = to_ecef.transform(lon, lat, local[:, 2] + OFFSET[2])
     return np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], -1)

@@ -25,10 +25,11 @@ from typing import TextIO
 
 import numpy as np
 
+from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form
 from gsgeo.errors import InputError
 from gsgeo.tiles import gltf, lod, spz, swap
 from gsgeo.tiles import outdir as outdir_mod
-from gsgeo.tiles.georef import Georeference, Placement, ecef_to_geodetic
+from gsgeo.tiles.georef import Georeference, Placement
 from gsgeo.tiles.source import Source, open_source
 from gsgeo.tiles.workers import cpu_count, pool, shared_empty
 
@@ -459,9 +460,9 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
                 bar.update(done)
             bar.close()
             imap.close()   # the workers exit while the tileset JSON is written
-            lon, lat, h = ecef_to_geodetic(_corners(root.lo.astype(float), root.hi.astype(float))
-                                           @ placement.r_root
-                                           + placement.centre_ecef)
+            lon, lat, h = ecef_to_geodetic_closed_form(
+                _corners(root.lo.astype(float), root.hi.astype(float)) @ placement.r_root
+                + placement.centre_ecef)
             summary = Summary(
                 input=str(src_path), output=str(out), splats_in=count, splats_written=n,
                 dropped_nonfinite=dropped, sh_degree=sh_degree, tiles=len(nodes),

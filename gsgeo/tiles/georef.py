@@ -34,7 +34,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gsgeo.crs.ellipsoid import ecef_to_geodetic, enu_rotation, geodetic_to_ecef
+from gsgeo.crs.ellipsoid import (
+    ecef_to_geodetic_closed_form,
+    enu_rotation,
+    geodetic_to_ecef_closed_form,
+)
 from gsgeo.errors import CRSError, InputError
 from gsgeo.tiles.splats import Splats, matrix_to_quat, quat_multiply, rotation_angle, sh_rotation
 
@@ -134,7 +138,7 @@ class Georeference:
         elif self.kind == "crs":
             if self.crs is None:
                 raise InputError("--crs is required with --offset")
-            from gsgeo.tiles.gridplacement import parse_crs
+            from gsgeo.crs.resolve import parse_crs
             c = parse_crs(self.crs)
             horiz = c.sub_crs_list[0] if c.is_compound else c
             if not horiz.is_projected:
@@ -185,7 +189,7 @@ class Georeference:
             return m[:3, :3] @ ax.T, m[:3, 3], s
         lat, lon, h = self.origin
         r = enu_rotation(lon, lat).T @ rot_z(-self.heading) @ ax
-        t = geodetic_to_ecef(lon, lat, h)
+        t = geodetic_to_ecef_closed_form(lon, lat, h)
         return r, t, 1.0
 
     def placement(self, lo: np.ndarray, hi: np.ndarray) -> Placement:
@@ -206,7 +210,7 @@ class Placement:
     def __init__(self, georef: Georeference, centre_ecef: np.ndarray) -> None:
         self.georef = georef
         self.centre_ecef = np.asarray(centre_ecef, np.float64)
-        lon, lat, h = ecef_to_geodetic(self.centre_ecef)
+        lon, lat, h = ecef_to_geodetic_closed_form(self.centre_ecef)
         self.centre_lonlath = (float(lon), float(lat), float(h))
         self.r_root = enu_rotation(float(lon), float(lat))   # ECEF -> root ENU
         self.operation = ""

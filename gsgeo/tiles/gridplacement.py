@@ -8,27 +8,18 @@ turn by the grid convergence at each splat and sizes scale by 1/k, k the point s
 from __future__ import annotations
 
 import os
-import warnings
 
 import numpy as np
-import pyproj
 from pyproj.exceptions import CRSError as PyprojCRSError
 from pyproj.exceptions import ProjError
 
 from gsgeo.crs import resolve as _resolve  # noqa: F401  (PROJ off the network before any use)
 from gsgeo.crs.ellipsoid import enu_rotation
-from gsgeo.crs.transformers import accuracy_m, choose
+from gsgeo.crs.resolve import parse_crs
+from gsgeo.crs.transformers import accuracy_m, candidates, choose, pipeline, projection, transformer
 from gsgeo.errors import CRSError, DatumError
 from gsgeo.tiles.georef import AXES, Georeference, Placement, rot_z
 from gsgeo.tiles.splats import Splats
-
-
-def parse_crs(text: str) -> pyproj.CRS:
-    """A pyproj CRS from user text; CRSError naming the text if PROJ does not know it."""
-    try:
-        return pyproj.CRS.from_user_input(text)
-    except PyprojCRSError as exc:
-        raise CRSError(f"unknown CRS {text!r} ({exc})") from None
 
 
 class GridPlacement(Placement):
@@ -40,20 +31,19 @@ class GridPlacement(Placement):
         self.horiz = c.sub_crs_list[0] if c.is_compound else c
         self.geog = self.horiz.geodetic_crs
         try:
-            self.inv = pyproj.Transformer.from_crs(self.horiz, self.geog, always_xy=True)
+            self.inv = transformer(self.horiz, self.geog)
             # The same explicit operation the measurements take back to the grid
             # (gsgeo.crs.transformers.choose at the scene centre), so a point measured in the
             # tileset returns to the input's own grid coordinates.
             lon_c, lat_c = self.inv.transform(c_in[0] + georef.offset[0],
                                               c_in[1] + georef.offset[1], errcheck=False)
-            self.to_ecef_t, _ = choose(self.geog.to_3d().to_wkt(), "EPSG:4978",
-                                       float(lon_c), float(lat_c))
-            self.proj = pyproj.Proj(self.horiz)
+            self.to_ecef_t, _ = choose(self.geog.to_3d(), "EPSG:4978", float(lon_c), float(lat_c))
+            self.proj = projection(self.horiz)
         except (ProjError, PyprojCRSError) as exc:
             raise CRSError(f"cannot build the transformation from {georef.crs}: {exc}") from None
         self.vert = None
         if georef.height == "vertical":
-            comp = pyproj.CRS.from_user_input(
+            comp = parse_crs(
                 {"$schema": "https://proj.org/schemas/v0.7/projjson.schema.json",
                  "type": "CompoundCRS", "name": "grid + vertical",
                  "components": [self.horiz.to_json_dict(),
@@ -61,14 +51,10 @@ class GridPlacement(Placement):
             if not comp.sub_crs_list[1].is_vertical:
                 raise CRSError(f"{georef.vertical_crs} is not a vertical CRS")
             try:
-                self.vert = pyproj.Transformer.from_crs(comp, self.geog.to_3d(), always_xy=True,
-                                                        allow_ballpark=False)
+                self.vert = transformer(comp, self.geog.to_3d(), allow_ballpark=False)
             except ProjError:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")   # the message below names the grid
-                    grp = pyproj.transformer.TransformerGroup(comp, self.geog.to_3d(),
-                                                              always_xy=True)
-                why = "; ".join(str(w) for w in grp.unavailable_operations[:1]) or \
+                grp = candidates(comp, self.geog.to_3d())
+                why = "; ".join(str(w) for w in grp.unavailable[:1]) or \
                     "no transformation without a geoid grid"
                 raise DatumError(
                     f"heights in {georef.vertical_crs} need a geoid grid that is not "
@@ -76,7 +62,7 @@ class GridPlacement(Placement):
         elif georef.height == "geoid":
             path = os.path.abspath(georef.geoid)
             try:
-                self.vert = pyproj.Transformer.from_pipeline(
+                self.vert = pipeline(
                     "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
                     f"+step +proj=vgridshift +grids={path} +multiplier=1 "
                     "+step +proj=unitconvert +xy_in=rad +xy_out=deg")

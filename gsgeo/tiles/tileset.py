@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gsgeo.crs.ellipsoid import ecef_to_geodetic, geodetic_to_ecef
+from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form, geodetic_to_ecef_closed_form
 from gsgeo.crs.modelmatrix import apply_directions, apply_points, invert_affine, matrix4
 from gsgeo.errors import InputError
 from gsgeo.tiles.gltf import Y_UP_TO_Z_UP
@@ -306,12 +306,12 @@ class Tileset:
             w, s, e, n, h0, h1 = (float(v) for v in bv["region"])
             lon = np.degrees([w, e]); lat = np.degrees([s, n])  # noqa: E702
             pts = [(lo, la, h) for lo in lon for la in lat for h in (h0, h1)]
-            return geodetic_to_ecef(*np.array(pts).T)
+            return geodetic_to_ecef_closed_form(*np.array(pts).T)
         raise InputError(f"{t.path}: bounding volume has no box, sphere or region")
 
     def geodetic_bounds(self, corners_ecef: np.ndarray) -> dict:
         """WGS 84 longitude, latitude (degrees) and ellipsoidal height (m) ranges of ECEF corners."""
-        lon, lat, h = ecef_to_geodetic(corners_ecef)
+        lon, lat, h = ecef_to_geodetic_closed_form(corners_ecef)
         return {"lon": (float(lon.min()), float(lon.max())),
                 "lat": (float(lat.min()), float(lat.max())),
                 "h": (float(h.min()), float(h.max()))}
