@@ -20,7 +20,7 @@ import gsgeo.server.api as api
 from gsgeo.crs.pipeline import measure_point
 from gsgeo.errors import InputError
 from gsgeo.server.app import ServerConfig, create_app
-from gsgeo.server.solver import SolverPool
+from gsgeo.server.intersect_pool import IntersectPool
 from gsgeo.session import parse_point
 
 
@@ -129,7 +129,7 @@ def test_intersect_runs_on_the_long_lived_solver_thread(client, monkeypatch):
 
 
 def test_solver_pool_threads_errors_and_restart():
-    pool = SolverPool(2)
+    pool = IntersectPool(2)
     warmed = []
 
     def where() -> tuple[str, int]:
@@ -153,4 +153,4 @@ def test_solver_pool_threads_errors_and_restart():
     assert asyncio.run(pool.run(lambda: 42)) == 42  # usable again after close
     pool.close()
     with pytest.raises(ValueError):
-        SolverPool(0)
+        IntersectPool(0)

@@ -3,7 +3,7 @@
 Endpoints are plain (sync) functions: FastAPI runs them in its thread pool, so the event loop
 keeps parsing and answering (static files, other requests) while numpy and PROJ work, and
 each store call is one SQLite transaction. POST /intersect, the one the viewer calls at every
-click, runs on the server's long-lived solver threads instead (gsgeo.server.solver: warm PROJ
+click, runs on the server's long-lived threads instead (gsgeo.server.intersect_pool: warm PROJ
 objects), and never on the event loop itself (a solve there stalls every other request, and
 the latency tail with it when the machine is busy).
 """
@@ -26,8 +26,8 @@ from gsgeo.server import models as m
 from gsgeo.server.scenes import list_scenes
 from gsgeo.store import FeatureRecord, PointRecord, Project, Projects
 from gsgeo.store.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
+from gsgeo.store.measuring import check_excluded, measure, session_point
 from gsgeo.store.projects import validate_settings
-from gsgeo.store.solving import check_excluded, measure, session_point
 
 
 class ErrorBody(m.BaseModel):
@@ -105,10 +105,10 @@ async def intersect(body: m.IntersectRequest, request: Request) -> dict[str, Any
     grid coordinates and covariance (when ``crs`` is given), WGS 84 position, sigma0,
     residuals per ray, outlier flags and warnings (gsgeo.crs.pipeline ``to_dict``)."""
     state = request.app.state
-    return await state.solver.run(solve_intersect, body, state.config.data_dir)
+    return await state.intersect_pool.run(intersect_request, body, state.config.data_dir)
 
 
-def warm_solve() -> None:
+def warm_intersect() -> None:
     """A solve of two synthetic rays (no grid CRS): imports the pipeline and builds the PROJ
     objects every request needs on the calling thread."""
     up = [3978000.0, -8700.0, 4968000.0]  # ECEF, metres: near London, ~50 m up
@@ -117,8 +117,8 @@ def warm_solve() -> None:
     measure(session_point("warm-up", rays), {"source_crs": "EPSG:4978"}, [], None).to_dict()
 
 
-def solve_intersect(body: m.IntersectRequest, data_dir: Path) -> Response:
-    """The work of POST /intersect, on a solver thread (gsgeo.server.solver)."""
+def intersect_request(body: m.IntersectRequest, data_dir: Path) -> Response:
+    """The work of POST /intersect, on a thread of gsgeo.server.intersect_pool."""
     rays = [r.model_dump(exclude_none=True) for r in body.rays]
     sp = session_point(body.id, rays, body.code, body.description)
     excluded = check_excluded(body.exclude, len(rays), "exclude")
@@ -165,7 +165,7 @@ def get_project(pid: PID, request: Request) -> dict[str, Any]:
     return project_json(p) | {"counts": s}
 
 
-@router.patch("/projects/{pid}", summary="Change a project; new solving settings re-solve all points")
+@router.patch("/projects/{pid}", summary="Change a project; new solving settings re-measure all points")
 def patch_project(pid: PID, body: m.ProjectPatch, request: Request) -> dict[str, Any]:
     changes = body.model_dump(exclude_unset=True)
     for key in ("name", "source_crs", "sigma_px"):
@@ -174,10 +174,10 @@ def patch_project(pid: PID, body: m.ProjectPatch, request: Request) -> dict[str,
     return project_json(svc(request).update_project(pid, changes))
 
 
-@router.post("/projects/{pid}/resolve", summary="Re-solve every point from its rays")
-def resolve_project(pid: PID, request: Request) -> dict[str, Any]:
+@router.post("/projects/{pid}/resolve", summary="Re-measure every point from its rays")
+def remeasure_project(pid: PID, request: Request) -> dict[str, Any]:
     s = svc(request)
-    p = s.resolve_all(pid)
+    p = s.remeasure_all(pid)
     return project_json(p) | {"counts": {k: v for k, v in s.project_summary(pid).items()
                                          if k != "project"}}
 

@@ -28,9 +28,9 @@ from gsgeo.server.faults import CatchAll
 from gsgeo.server.files import file_response
 from gsgeo.server.guard import BodyTooLarge, Guard, MiB
 from gsgeo.server.hosts import is_loopback
+from gsgeo.server.intersect_pool import IntersectPool
 from gsgeo.server.routing import allowed_methods, body_limiter
 from gsgeo.server.scenes import SceneFolders
-from gsgeo.server.solver import SolverPool
 from gsgeo.store import ConflictError, NotFoundError, Projects, StoreError, open_store
 
 log = logging.getLogger("gsgeo.server")
@@ -51,7 +51,7 @@ class ServerConfig:
     cesium_dir: Path | None = None  # default: web/node_modules/cesium/Build/Cesium
     max_body: int = 4 * MiB
     max_upload: int = 64 * MiB
-    solver_threads: int = 1  # long-lived threads for POST /api/intersect (gsgeo.server.solver)
+    solver_threads: int = 1  # long-lived threads for POST /api/intersect (gsgeo.server.intersect_pool)
     allowed_hosts: set[str] | None = field(default=None)  # None: derived from host
 
     def __post_init__(self) -> None:
@@ -160,15 +160,15 @@ The API is at <a href="/docs">/docs</a>; scenes are listed at
 def create_app(config: ServerConfig, store=None) -> FastAPI:
     """The application; ``store`` defaults to the SQLite store of ``config.data_dir``."""
     store = store or open_store(config.data_dir)
-    solver = SolverPool(config.solver_threads)
+    intersect_pool = IntersectPool(config.solver_threads)
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI):
-        from gsgeo.server.api import warm_solve
+        from gsgeo.server.api import warm_intersect
 
-        await solver.warm_up(warm_solve)
+        await intersect_pool.warm_up(warm_intersect)
         yield
-        solver.close()
+        intersect_pool.close()
         store.close()
 
     app = FastAPI(title="gsgeo", version=__version__, lifespan=lifespan,
@@ -176,7 +176,7 @@ def create_app(config: ServerConfig, store=None) -> FastAPI:
                               "Splatting scenes. Rays in, grid coordinates with covariance out.")
     app.state.config = config
     app.state.store = store
-    app.state.solver = solver
+    app.state.intersect_pool = intersect_pool
     app.state.projects = Projects(store, config.data_dir)
     _install_error_handlers(app)
 

@@ -14,8 +14,8 @@ from pathlib import Path
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.export import write_measurements
 from gsgeo.store import Projects
+from gsgeo.store.measuring import measure, session_point
 from gsgeo.store.projects import check_points_in_grid, feature_measures, validate_settings
-from gsgeo.store.solving import measure, session_point
 
 SUFFIX = {"gpkg": ".gpkg", "geojson": ".geojson", "geojson-grid": ".geojson", "csv": ".csv"}
 

@@ -1,4 +1,4 @@
-"""Projects as the API sees them: validation, solving and recomputation on top of a Store.
+"""Projects as the API sees them: validation, measuring and re-measuring on top of a Store.
 
 Every public method is one transaction. Solving happens inside the write transaction, so a
 point is never stored with a result from other settings than the ones stored with its
@@ -19,6 +19,14 @@ from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.store.accuracy import accuracy_report
 from gsgeo.store.base import Store, Transaction
 from gsgeo.store.checkpoints import CheckPointRow
+from gsgeo.store.measuring import (
+    check_excluded,
+    find_geoid,
+    json_ready,
+    measure,
+    measured_fields,
+    session_point,
+)
 from gsgeo.store.records import (
     CheckPointRecord,
     ConflictError,
@@ -26,14 +34,6 @@ from gsgeo.store.records import (
     NotFoundError,
     PointRecord,
     Project,
-)
-from gsgeo.store.solving import (
-    check_excluded,
-    json_ready,
-    measure,
-    resolve_geoid,
-    session_point,
-    solved_fields,
 )
 from gsgeo.store.validate import item_id, sigma_px, slug
 
@@ -82,7 +82,7 @@ def validate_settings(settings: dict[str, Any], data_dir: Path | None) -> dict[s
         except CRSError as exc:
             field = "vertical" if out["vertical"] and "vertical" in str(exc).lower() else "crs"
             raise exc.within(field) from None
-    resolve_geoid(out["geoid"], data_dir)
+    find_geoid(out["geoid"], data_dir)
     return out
 
 
@@ -154,7 +154,7 @@ class Projects:
         return scene
 
     def update_project(self, pid: str, changes: dict[str, Any]) -> Project:
-        """Change name/description/scene and solving settings; a settings change re-solves
+        """Change name/description/scene and solving settings; a settings change re-measures
         every point from its rays in the same transaction."""
         unknown = set(changes) - {"name", "description", "scene", *SETTINGS}
         if unknown:
@@ -179,23 +179,23 @@ class Projects:
                     for k in SETTINGS:
                         setattr(p, k, new[k])
                     p.settings_rev += 1
-                    self._resolve_all(tx, p)
+                    self._remeasure_all(tx, p)
             tx.update_project(p)
             return p
 
-    def resolve_all(self, pid: str) -> Project:
-        """Re-solve every point from its rays with the current settings (one transaction),
+    def remeasure_all(self, pid: str) -> Project:
+        """Re-measure every point from its rays with the current settings (one transaction),
         e.g. after a geoid grid file was replaced."""
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
             p.settings_rev += 1
-            self._resolve_all(tx, p)
+            self._remeasure_all(tx, p)
             tx.update_project(p)
             return p
 
-    def _resolve_all(self, tx: Transaction, p: Project) -> None:
+    def _remeasure_all(self, tx: Transaction, p: Project) -> None:
         for pt in tx.list_points(p.id):
-            self._solve_into(pt, p)
+            self._measure_into(pt, p)
             tx.update_point(pt)
 
     def delete_project(self, pid: str) -> None:
@@ -204,12 +204,12 @@ class Projects:
                 raise NotFoundError(f"project '{pid}' does not exist")
 
     # points ---------------------------------------------------------------------------
-    def _solve_into(self, pt: PointRecord, p: Project, strict: bool = False) -> None:
+    def _measure_into(self, pt: PointRecord, p: Project, strict: bool = False) -> None:
         """Solve ``pt`` with the settings of ``p``; on failure store the reason (or raise)."""
         sp = session_point(pt.id, pt.rays, pt.code, pt.description)
         try:
             m = measure(sp, p.settings(), pt.excluded, self.data_dir)
-            pt.result, pt.record = solved_fields(m)
+            pt.result, pt.record = measured_fields(m)
             pt.error = None
         except GsgeoError as exc:
             if strict:
@@ -265,7 +265,7 @@ class Projects:
                                         field="id")
             pt = PointRecord(project_id=pid, id=point_id, rays=rays, code=code,
                              description=description, excluded=excluded)
-            self._solve_into(pt, p, strict=True)
+            self._measure_into(pt, p, strict=True)
             tx.insert_point(pt)
             return pt
 
@@ -279,7 +279,7 @@ class Projects:
 
         changes keys: id, code, description, excluded (full list of 0-based indices),
         exclude_ray, restore_ray (one index), rays (replaces all rays; clears exclusions).
-        Changing rays or exclusions re-solves; a change that leaves the point unsolvable is
+        Changing rays or exclusions re-measures; a change that leaves the point unsolvable is
         refused and nothing is written.
         """
         allowed = {"id", "code", "description", "excluded", "exclude_ray", "restore_ray", "rays"}
@@ -289,11 +289,11 @@ class Projects:
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
             pt = self._point(tx, pid, point_id)
-            resolve = False
+            remeasure = False
             if changes.get("rays") is not None:
                 pt.rays = self._rays(changes["rays"])
                 pt.excluded = []
-                resolve = True
+                remeasure = True
             excluded = set(pt.excluded)
             if changes.get("excluded") is not None:
                 excluded = set(changes["excluded"])
@@ -308,7 +308,7 @@ class Projects:
                 field = next((k for k in ("exclude_ray", "restore_ray", "excluded")
                               if changes.get(k) is not None), "excluded")
                 pt.excluded = check_excluded(list(excluded), len(pt.rays), field)
-                resolve = True
+                remeasure = True
             if changes.get("code") is not None:
                 pt.code = _text(changes["code"], "code", 200)
             if changes.get("description") is not None:
@@ -319,8 +319,8 @@ class Projects:
                 if pt.id != old_id and tx.get_point(pid, pt.id) is not None:
                     raise ConflictError(f"point '{pt.id}' already exists in project '{pid}'",
                                         field="id")
-            if resolve or pt.solved_rev != p.settings_rev:
-                self._solve_into(pt, p, strict=True)
+            if remeasure or pt.solved_rev != p.settings_rev:
+                self._measure_into(pt, p, strict=True)
             else:
                 for blob in (pt.result, pt.record):
                     if blob is not None:
@@ -371,7 +371,7 @@ class Projects:
                 pt = PointRecord(project_id=pid, id=point_id, rays=[r.to_dict() for r in sp.rays],
                                  code=sp.code, description=sp.description)
                 try:
-                    self._solve_into(pt, p, strict=True)
+                    self._measure_into(pt, p, strict=True)
                 except GsgeoError as exc:
                     raise exc.part_of(at, f"point '{point_id}'") from None
                 tx.insert_point(pt)
@@ -576,7 +576,7 @@ def check_points_in_grid(cps: list[CheckPointRecord], project: Project,
     grid = crs or project.crs
     same_grid = grid == project.crs
     vertical = project.vertical if same_grid else None
-    geoid = resolve_geoid(project.geoid, data_dir) if same_grid else None
+    geoid = find_geoid(project.geoid, data_dir) if same_grid else None
     out = np.full((len(cps), 3), np.nan)
     target = projected_crs(grid)
     for src in sorted({c.crs for c in cps}):

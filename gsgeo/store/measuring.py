@@ -1,4 +1,10 @@
-"""Solving a stored point from its rays with its project's settings (through gsgeo.crs)."""
+"""Measuring a project's point: its rays (session-JSON dicts, as stored) with the project's
+settings (crs, vertical or geoid, source_crs, sigma_px) through gsgeo.crs.pipeline.
+
+Words: *solve* is the least-squares maths (gsgeo.solve); *measure* is that plus the CRS path
+(rays to grid coordinates), as done here; *re-measure* is measuring stored points again, e.g.
+after a settings change; *resolve* is left to gsgeo.crs (parsing a CRS text).
+"""
 
 from __future__ import annotations
 
@@ -43,7 +49,7 @@ def check_excluded(excluded: list[int], n_rays: int, field: str = "excluded") ->
     return out
 
 
-def resolve_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
+def find_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
     """A geoid named in a project is a file in DATA/geoids/ (never an arbitrary path)."""
     if not geoid:
         return None
@@ -63,11 +69,11 @@ def measure(point: SessionPoint, settings: dict[str, Any], excluded: list[int],
     from gsgeo.crs.pipeline import measure_point
 
     return measure_point(point, crs=settings.get("crs"), vertical=settings.get("vertical"),
-                         geoid=resolve_geoid(settings.get("geoid"), data_dir),
+                         geoid=find_geoid(settings.get("geoid"), data_dir),
                          source_crs=settings.get("source_crs") or "EPSG:4978",
                          sigma_px=float(settings.get("sigma_px") or 1.0), exclude=excluded)
 
 
-def solved_fields(m) -> tuple[dict[str, Any], dict[str, Any]]:
+def measured_fields(m) -> tuple[dict[str, Any], dict[str, Any]]:
     """(result, record) of a Measurement as JSON-ready dicts."""
     return json_ready(m.to_dict()), json_ready(m.record())

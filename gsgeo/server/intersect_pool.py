@@ -1,4 +1,4 @@
-"""Long-lived solver threads for the stateless solves (POST /api/intersect).
+"""Long-lived threads for the stateless intersections of POST /api/intersect.
 
 Why not FastAPI's thread pool: anyio starts worker threads on demand (up to 40) and ends them
 after 10 s idle, and pyproj keeps its PROJ objects (every Transformer, CRS and the operation
@@ -23,13 +23,13 @@ T = TypeVar("T")
 log = logging.getLogger("gsgeo.server")
 
 
-class SolverPool:
+class IntersectPool:
     """``threads`` worker threads, started on first use and kept until :meth:`close`
     (after which the next use starts them again: an app may be run more than once)."""
 
     def __init__(self, threads: int = 1):
         if not 1 <= threads <= 64:
-            raise ValueError(f"solver threads must be between 1 and 64, got {threads}")
+            raise ValueError(f"intersect threads must be between 1 and 64, got {threads}")
         self.threads = threads
         self._executor: ThreadPoolExecutor | None = None
         self._lock = threading.Lock()
@@ -42,7 +42,7 @@ class SolverPool:
             return self._executor
 
     async def run(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
-        """``fn(*args, **kwargs)`` on a solver thread; exceptions propagate to the caller."""
+        """``fn(*args, **kwargs)`` on one of the pool's threads; exceptions propagate to the caller."""
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(self._pool(), functools.partial(fn, *args, **kwargs))
 
@@ -64,7 +64,7 @@ class SolverPool:
             return_exceptions=True)
         for r in results:
             if isinstance(r, BaseException):
-                log.warning("solver warm-up failed: %s", r)
+                log.warning("intersect pool warm-up failed: %s", r)
 
     def close(self) -> None:
         """Finish the running solves and end the threads."""
