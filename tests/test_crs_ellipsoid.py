@@ -3,7 +3,7 @@ PROJ is loaded only with the network off, and only where it is needed."""
 
 from __future__ import annotations
 
-import ast
+import os
 import subprocess
 import sys
 
@@ -63,24 +63,44 @@ def test_poles_and_equator_by_hand():
     assert lat[0] == pytest.approx(-90.0, abs=1e-12) and h[0] == pytest.approx(2.0, abs=1e-9)
 
 
+#: Every public way gsgeo reaches PROJ; each must turn the network off before PROJ works.
+PROJ_PATHS = {
+    "parse_crs": "from gsgeo.crs.resolve import parse_crs; parse_crs('EPSG:27700')",
+    "transformer": "from gsgeo.crs.transformers import transformer; "
+                   "transformer('EPSG:4979', 'EPSG:4978')",
+    "pipeline": "from gsgeo.crs.transformers import pipeline; pipeline('+proj=noop')",
+    "candidates": "from gsgeo.crs.transformers import candidates; "
+                  "candidates('EPSG:4979', 'EPSG:27700')",
+    "projection": "from gsgeo.crs.transformers import projection; projection('EPSG:27700')",
+    "EnuFrame": "from gsgeo.crs.frames import EnuFrame; EnuFrame.from_geodetic(0.0, 51.0, 0.0)",
+    "to_grid": "from gsgeo.crs import to_grid, geodetic_to_ecef; "
+               "to_grid(geodetic_to_ecef(-1.5, 52.5, 80.0), None, 'EPSG:27700')",
+    "grid placement": "import numpy as np; from gsgeo.tiles.georef import Georeference; "
+                      "Georeference('crs', crs='EPSG:32617', offset=(330000.0, 4430000.0, 0.0))"
+                      ".placement(np.zeros(3), np.ones(3))",
+    "demo truth": "from gsgeo.demo.place import local_to_ecef; local_to_ecef([[0.0, 0.0, 0.0]])",
+}
+
+
 def test_every_module_using_pyproj_turns_the_network_off_first():
-    """PROJ_NETWORK=OFF is set by importing gsgeo.crs.resolve; gsgeo.crs itself no longer
-    imports it (so gsgeo.crs.ellipsoid is cheap), so each pyproj user must."""
-    offenders = []
-    for path in sorted((REPO / "gsgeo").rglob("*.py")):
-        tree = ast.parse(path.read_text(encoding="utf-8"))
-        names = set()
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Import):
-                names |= {a.name for a in node.names}
-            elif isinstance(node, ast.ImportFrom) and node.module:
-                names.add(node.module)
-                names |= {f"{node.module}.{a.name}" for a in node.names}
-        uses_proj = any(n == "pyproj" or n.startswith("pyproj.") for n in names)
-        if uses_proj and path.name != "resolve.py" and not any(
-                n.startswith("gsgeo.crs.resolve") for n in names):
-            offenders.append(str(path.relative_to(REPO)))
-    assert offenders == []
+    """PROJ_NETWORK=OFF is an explicit call (gsgeo.crs.resolve.network_off) made by parse_crs
+    and the transformer factory, which every pyproj user goes through (tests/test_crs_layout.py
+    checks that on the source); here each public path is run in a fresh process whose
+    environment asks PROJ for the network, and must end with the network off."""
+    env = {**os.environ, "PROJ_NETWORK": "ON"}
+    probe = "; import os, pyproj; print(pyproj.network.is_network_enabled(), os.environ['PROJ_NETWORK'])"
+    control = subprocess.run([sys.executable, "-c", "import gsgeo.crs.resolve" + probe],
+                             cwd=REPO, env=env, capture_output=True, text=True)
+    assert control.stdout.split() == ["True", "ON"], control.stderr  # importing alone: no change
+    runs = {name: subprocess.Popen([sys.executable, "-c", code + probe], cwd=REPO, env=env,
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            for name, code in PROJ_PATHS.items()}
+    found = {}
+    for name, run in runs.items():
+        out, err = run.communicate(timeout=120)
+        assert run.returncode == 0, f"{name}: {err}"
+        found[name] = out.split()
+    assert found == {name: ["False", "OFF"] for name in PROJ_PATHS}
 
 
 def _run(code: str) -> str:

@@ -1,9 +1,9 @@
 """gsgeo.crs: frames (ECEF <-> ENU), grid output with covariance,
 vertical datums and the measurement pipeline. Knows PROJ, never HTTP.
 
-PROJ never uses the network from gsgeo: every module that uses pyproj imports
-gsgeo.crs.resolve, which sets PROJ_NETWORK=OFF on import (tests/test_crs_ellipsoid.py checks
-this).
+PROJ never uses the network from gsgeo: every CRS is parsed by gsgeo.crs.resolve.parse_crs
+and every transformer built by gsgeo.crs.transformers, and both call
+gsgeo.crs.resolve.network_off() first (tests/test_crs_ellipsoid.py checks this).
 Importing the package alone loads no PROJ, so gsgeo.crs.ellipsoid (numpy only) is cheap.
 """
 
@@ -18,7 +18,7 @@ _WHERE = {
     "to_grid_many": "grid",
     "Measurement": "pipeline", "MeasurementFailure": "pipeline", "measure_point": "pipeline",
     "measure_session": "pipeline",
-    "disable_network": "resolve", "grid_crs": "resolve", "parse_crs": "resolve",
+    "network_off": "resolve", "grid_crs": "resolve", "parse_crs": "resolve",
     "source_crs": "resolve",
 }
 
@@ -42,13 +42,13 @@ __all__ = [
     "Measurement",
     "MeasurementFailure",
     "analytic_jacobian",
-    "disable_network",
     "ecef_to_geodetic",
     "enu_rotation",
     "geodetic_to_ecef",
     "grid_crs",
     "measure_point",
     "measure_session",
+    "network_off",
     "parse_crs",
     "source_crs",
     "to_grid",

@@ -2,8 +2,8 @@
 
 Every CRS enters gsgeo through these functions, so an unknown code, a geographic CRS where a
 projected one is needed, or a geocentric source that is not geocentric gives one clear
-:class:`~gsgeo.errors.CRSError`. PROJ never goes to the network from gsgeo (see
-:func:`disable_network`).
+:class:`~gsgeo.errors.CRSError`. PROJ never goes to the network from gsgeo: parse_crs and the
+transformer factory call :func:`network_off` (an explicit call, not an import side effect).
 """
 
 from __future__ import annotations
@@ -19,14 +19,22 @@ from pyproj.exceptions import CRSError as ProjCRSError
 
 from gsgeo.errors import CRSError
 
+_network = {"off": False}
 
-def disable_network() -> None:
-    """Keep PROJ off the network (no grid downloads from cdn.proj.org at run time)."""
+
+def network_off() -> None:
+    """Keep PROJ off the network (no grid downloads from cdn.proj.org at run time).
+
+    Idempotent and cheap after the first call. :func:`parse_crs` and every factory of
+    :mod:`gsgeo.crs.transformers` call it before PROJ is used; code that hands PROJ work to
+    another library (GDAL through pyogrio) calls it first itself. Sets PROJ_NETWORK=OFF for
+    PROJ contexts created later (GDAL's, worker processes') and turns pyproj's off.
+    """
+    if _network["off"]:
+        return
     os.environ["PROJ_NETWORK"] = "OFF"
     pyproj.network.set_network_enabled(False)
-
-
-disable_network()
+    _network["off"] = True
 
 
 def parse_crs(crs: object) -> CRS:
@@ -35,8 +43,9 @@ def parse_crs(crs: object) -> CRS:
     "EPSG:27700+5701", WKT, a PROJ string, PROJ JSON) or a PROJ JSON dict.
 
     Text and codes are parsed once (cached). Raises CRSError naming the input when PROJ does
-    not know it.
+    not know it. Turns PROJ's network off first (:func:`network_off`).
     """
+    network_off()
     if isinstance(crs, CRS):
         return crs
     if isinstance(crs, int) and not isinstance(crs, bool):

@@ -2,7 +2,8 @@
 
 Every pyproj Transformer, TransformerGroup and Proj of gsgeo is built here. A Transformer is
 built once per (source, target, PROJ data directory) and reused for every point
-(``functools.lru_cache``); gsgeo never builds one per point. Operations are chosen
+(``functools.lru_cache``); gsgeo never builds one per point. Each factory turns PROJ's network
+off before building (:func:`gsgeo.crs.resolve.network_off`). Operations are chosen
 explicitly from PROJ's ranked candidates (`TransformerGroup`) so that the operation used is
 known before transforming and recorded with each result.
 
@@ -23,9 +24,7 @@ import pyproj
 from pyproj import Transformer
 from pyproj.transformer import TransformerGroup
 
-from gsgeo.crs.resolve import disable_network, parse_crs
-
-disable_network()
+from gsgeo.crs.resolve import network_off, parse_crs
 
 
 def _datadir() -> str:
@@ -44,6 +43,7 @@ def crs_key(crs: object) -> str:
 
 @functools.lru_cache(maxsize=128)
 def _transformer(src: str, dst: str, allow_ballpark: bool, datadir: str) -> Transformer:
+    network_off()
     return Transformer.from_crs(parse_crs(src), parse_crs(dst), always_xy=True,
                                 allow_ballpark=allow_ballpark)
 
@@ -57,6 +57,7 @@ def transformer(src: object, dst: object, *, allow_ballpark: bool = True) -> Tra
 
 @functools.lru_cache(maxsize=128)
 def _pipeline(definition: str, datadir: str) -> Transformer:
+    network_off()
     return Transformer.from_pipeline(definition)
 
 
@@ -67,6 +68,7 @@ def pipeline(definition: str) -> Transformer:
 
 @functools.lru_cache(maxsize=32)
 def _projection(crs: str, datadir: str) -> pyproj.Proj:
+    network_off()
     return pyproj.Proj(parse_crs(crs))
 
 
@@ -104,6 +106,7 @@ def candidates(src: object, dst: object) -> Candidates:
     key = (src, dst, _datadir())
     found = cache.get(key)
     if found is None:
+        network_off()
         tg = TransformerGroup(parse_crs(src), parse_crs(dst), always_xy=True)
         found = Candidates(tuple(tg.transformers), tuple(tg.unavailable_operations))
         BUILDS["groups"] += 1

@@ -169,7 +169,9 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
     import pyogrio
     from pyproj.exceptions import CRSError
 
-    from gsgeo.crs import resolve as _resolve  # noqa: F401  (PROJ off the network before any use)
+    from gsgeo.crs.resolve import network_off
+
+    network_off()  # GDAL's PROJ reads the file's CRS: no grid downloads
 
     # GDAL would open any format it knows (a VRT, say, that reads files of the server)
     if not data.startswith(SQLITE_MAGIC):

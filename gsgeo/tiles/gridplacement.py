@@ -13,7 +13,6 @@ import numpy as np
 from pyproj.exceptions import CRSError as PyprojCRSError
 from pyproj.exceptions import ProjError
 
-from gsgeo.crs import resolve as _resolve  # noqa: F401  (PROJ off the network before any use)
 from gsgeo.crs.ellipsoid import enu_rotation
 from gsgeo.crs.resolve import parse_crs
 from gsgeo.crs.transformers import accuracy_m, candidates, choose, pipeline, projection, transformer
