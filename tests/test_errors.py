@@ -150,3 +150,10 @@ def test_cli_names_file_and_json_path(tmp_path, capsys):
     assert main(["solve", str(f)]) == 2
     err = capsys.readouterr().err
     assert err.strip() == f"gsgeo solve: error: {f}: points[0].rays[1]: missing 'direction'"
+
+
+def test_an_unparsable_body_is_about_the_field_body(client):
+    r = client.post("/api/intersect", content=b'{"rays": "\xff\xfe"}',
+                    headers={"content-type": "application/json"})
+    assert r.status_code == 422
+    assert r.json()["field"] == "body" and r.json()["message"].startswith("body: cannot be parsed")

@@ -23,7 +23,7 @@ from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Resp
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gsgeo import __version__
-from gsgeo.errors import GsgeoError
+from gsgeo.errors import GsgeoError, InputError
 from gsgeo.server.faults import CatchAll
 from gsgeo.server.files import file_response
 from gsgeo.server.guard import BodyTooLarge, Guard, MiB
@@ -132,15 +132,17 @@ def _install_error_handlers(app: FastAPI) -> None:
         if isinstance(exc.__cause__, BodyTooLarge):
             return _error(413, str(exc.__cause__), "body")
         msg = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
-        status = exc.status_code
-        if status == 400 and "parsing the body" in msg:
-            status, msg = 422, "body: cannot be parsed (malformed JSON, not UTF-8, or bad form data)"
+        status, field = exc.status_code, None
+        if status == 400 and "parsing the body" in msg:  # Starlette's words for a bad body
+            bad = InputError("cannot be parsed (malformed JSON, not UTF-8, or bad form data)",
+                             field="body")
+            status, msg, field = 422, str(bad), bad.field
         headers = dict(exc.headers or {})
         if status == 405:  # every method of the path, not only those of the first route
             allow = allowed_methods(app.router.routes, req.scope)
             headers["Allow"] = ", ".join(allow)
             msg = f"method {req.method} is not allowed here; allowed: {', '.join(allow)}"
-        resp = _error(status, msg, "body" if msg.startswith("body") else None)
+        resp = _error(status, msg, field)
         resp.headers.update(headers)
         return resp
 
