@@ -157,3 +157,16 @@ def test_an_unparsable_body_is_about_the_field_body(client):
                     headers={"content-type": "application/json"})
     assert r.status_code == 422
     assert r.json()["field"] == "body" and r.json()["message"].startswith("body: cannot be parsed")
+
+
+def test_an_unknown_vertical_crs_is_about_vertical_not_crs(client, project):
+    """The field used to be guessed from the word 'vertical' in PROJ's message; an unknown
+    vertical code (whose message does not say 'vertical') was blamed on ``crs``."""
+    r = client.post("/api/projects", json={"name": "x", "crs": "EPSG:32630",
+                                           "vertical": "EPSG:999999"})
+    assert r.status_code == 422
+    assert r.json()["field"] == "vertical" and r.json()["message"].startswith("vertical: unknown")
+    r = client.patch(f"/api/projects/{project}", json={"vertical": "nonsense"})
+    assert r.status_code == 422 and r.json()["field"] == "vertical"
+    r = client.post("/api/projects", json={"name": "x", "crs": "nonsense", "vertical": "EPSG:5701"})
+    assert r.status_code == 422 and r.json()["field"] == "crs"

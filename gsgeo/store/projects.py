@@ -78,10 +78,14 @@ def validate_settings(settings: dict[str, Any], data_dir: Path | None) -> dict[s
         raise CRSError("give either a vertical CRS or a geoid grid, not both", field="geoid")
     if out["crs"] is not None:
         try:
-            grid_crs(out["crs"], out["vertical"])
+            grid_crs(out["crs"])
         except CRSError as exc:
-            field = "vertical" if out["vertical"] and "vertical" in str(exc).lower() else "crs"
-            raise exc.within(field) from None
+            raise exc.within("crs") from None
+        if out["vertical"]:  # the grid alone is fine: what fails now is about the vertical
+            try:
+                grid_crs(out["crs"], out["vertical"])
+            except CRSError as exc:
+                raise exc.within("vertical") from None
     find_geoid(out["geoid"], data_dir)
     return out
 
