@@ -8,13 +8,15 @@ An error about one value of a document or request carries where that value is as
 ``field``, a JSON-path style location such as ``points[0].rays[2].direction``, apart from
 ``problem``, the message without it. ``str(exc)`` reads ``"field: problem"``. Code that parses
 a nested part re-raises with ``exc.within("points[0]")`` instead of building the path into a
-message; ``exc.in_source(path)`` names the file the document came from.
+message; ``exc.part_of(field, label)`` wraps an error located in something's own terms (a line
+of an uploaded file, a point of a session); ``exc.in_source(path)`` names the file the
+document came from. The API's 4xx ``field`` and the CLI's message read these attributes.
 """
 
 from __future__ import annotations
 
 import copy
-from typing import Self
+from typing import Any, Self
 
 
 def join_field(parent: str | None, child: str | None) -> str | None:
@@ -45,7 +47,12 @@ class GsgeoError(Exception):
     def __str__(self) -> str:
         return "".join(f"{p}: " for p in (self.source, self.field) if p) + self.problem
 
-    def __reduce__(self):  # pickling and copy keep field and source (not only args)
+    def __repr__(self) -> str:
+        extra = "".join(f", {k}={v!r}" for k, v in (("field", self.field), ("source", self.source))
+                        if v is not None)
+        return f"{type(self).__name__}({self.problem!r}{extra})"
+
+    def __reduce__(self) -> tuple[Any, ...]:  # pickle and copy keep field and source, not only args
         return (type(self), (self.problem,), self.__dict__.copy())
 
     def at(self, field: str | None) -> Self:
