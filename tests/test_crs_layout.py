@@ -91,3 +91,45 @@ def test_the_factory_takes_crs_objects_and_text_alike():
     assert transformer(4979, "EPSG:4978") is transformer("EPSG:4979", "EPSG:4978")
     x, _, _ = t.transform(0.0, 0.0, 0.0)
     assert x == pytest.approx(6378137.0)
+
+
+def _imports(path, tree) -> set[str]:
+    """gsgeo modules a module imports anywhere (function-level and TYPE_CHECKING included)."""
+    out = set()
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Import):
+            out |= {a.name for a in n.names}
+        elif isinstance(n, ast.ImportFrom) and n.module:
+            out.add(n.module)
+            out |= {f"{n.module}.{a.name}" for a in n.names}
+    return {m for m in out if m.startswith("gsgeo.")}
+
+
+def test_no_import_cycle_in_the_geodesy_and_tiles_stack():
+    mods = {}
+    for path, tree in _modules():
+        rel = path.relative_to(REPO).with_suffix("")
+        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        mods[name] = (path, tree)
+    graph = {m: {i for i in _imports(*mods[m]) if i in mods and i != m} for m in mods}
+    ours = ("gsgeo.crs", "gsgeo.tiles", "gsgeo.demo", "gsgeo.commands.tiles", "gsgeo.commands.demo")
+    cycles = []
+
+    def visit(m: str, stack: list[str]) -> None:
+        for d in sorted(graph[m]):
+            if not d.startswith(ours):
+                continue
+            if d in stack:
+                cycles.append(stack[stack.index(d):] + [d])
+            elif d not in done:
+                visit(d, stack + [d])
+        done.add(m)
+
+    done: set[str] = set()
+    for m in sorted(graph):
+        if m.startswith(ours) and m not in done:
+            visit(m, [m])
+    assert cycles == []
+    # and the tiles stack stays above crs
+    assert not [m for m in graph if m.startswith("gsgeo.crs")
+                for d in graph[m] if d.startswith("gsgeo.tiles")]

@@ -29,7 +29,8 @@ from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form
 from gsgeo.errors import InputError
 from gsgeo.tiles import gltf, lod, spz, swap
 from gsgeo.tiles import outdir as outdir_mod
-from gsgeo.tiles.georef import Georeference, Placement
+from gsgeo.tiles.georef import Georeference
+from gsgeo.tiles.placement import Placement
 from gsgeo.tiles.source import Source, open_source
 from gsgeo.tiles.workers import cpu_count, pool, shared_empty
 

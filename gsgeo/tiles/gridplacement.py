@@ -17,14 +17,14 @@ from gsgeo.crs.ellipsoid import enu_rotation
 from gsgeo.crs.resolve import parse_crs
 from gsgeo.crs.transformers import accuracy_m, candidates, choose, pipeline, projection, transformer
 from gsgeo.errors import CRSError, DatumError
-from gsgeo.tiles.georef import AXES, Georeference, Placement, rot_z
+from gsgeo.tiles.placement import AXES, GeoreferenceLike, Placement, rot_z
 from gsgeo.tiles.splats import Splats
 
 
 class GridPlacement(Placement):
     """Projected-CRS input: exact pyproj path for centres, convergence and scale factor."""
 
-    def __init__(self, georef: Georeference, c_in: np.ndarray) -> None:
+    def __init__(self, georef: GeoreferenceLike, c_in: np.ndarray) -> None:
         self.g = georef
         c = parse_crs(georef.crs)
         self.horiz = c.sub_crs_list[0] if c.is_compound else c
