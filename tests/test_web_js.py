@@ -178,3 +178,31 @@ console.log(JSON.stringify(r));""")
     assert got["cancelled"] == ["idle", None, False]
     assert got["whileMeasuring"] == [False, "measure", ["Finish or cancel the point first (Enter / Esc)."],
                                      False, []]
+
+
+def test_stored_objects_merge_into_the_lists_in_server_order():
+    """web/js/merge.js: a stored object replaces its entry in place (also under a new id after
+    a rename), a new one goes last as the server lists it, a deleted one leaves; a changed
+    point's lines and polygons are found for re-fetching their measures."""
+    src = (f"import * as M from '{(WEB_JS / 'merge.js').as_uri()}';\n" + """
+const list = [{ id: "P1", v: 1 }, { id: "P2", v: 1 }, { id: "P3", v: 1 }];
+const feats = [{ id: "L1", points: ["P1", "P2"] }, { id: "L2", points: ["P3", "P4"] }];
+console.log(JSON.stringify({
+  replaced: M.upsert(list, { id: "P2", v: 2 }),
+  added: M.upsert(list, { id: "P9", v: 2 }),
+  renamed: M.upsert(list, { id: "Q2", v: 2 }, "P2"),
+  removed: M.without(list, "P1"),
+  missing: M.without(list, "X"),
+  same: list,
+  uses: [M.usesAny(feats, ["P2"]), M.usesAny(feats, ["P5", "P4"]), M.usesAny(feats, ["P5"])],
+}));""")
+    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
+                         text=True, check=True, timeout=60)
+    got = json.loads(out.stdout)
+    ids = {k: [(x["id"], x["v"]) for x in v] for k, v in got.items() if k != "uses"}
+    assert ids["replaced"] == [("P1", 1), ("P2", 2), ("P3", 1)]
+    assert ids["added"] == [("P1", 1), ("P2", 1), ("P3", 1), ("P9", 2)]
+    assert ids["renamed"] == [("P1", 1), ("Q2", 2), ("P3", 1)]
+    assert ids["removed"] == [("P2", 1), ("P3", 1)]
+    assert ids["missing"] == ids["same"] == [("P1", 1), ("P2", 1), ("P3", 1)]  # never mutated
+    assert got["uses"] == [True, True, False]

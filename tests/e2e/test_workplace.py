@@ -481,3 +481,54 @@ def test_credits_name_cesiumjs_without_ion_branding(server, browser):
         assert p.errors == []
     finally:
         p.close()
+
+
+def test_stores_merge_the_servers_answer(server, browser, project):
+    """Storing, changing and deleting points and lines updates the lists from the server's
+    answer: none of the collections (points, lines, polygons, check points) is fetched again;
+    only the line on a changed point (its measures) and the accuracy are."""
+    p = Page(browser, f"{server}/?project={project}")
+    gets: list[str] = []
+    p.page.on("request", lambda r: r.method == "GET" and "/api/projects/" in r.url
+              and gets.append(r.url.split("/api/projects/", 1)[1]))
+    refetched = re.compile(r"^[^/]+/(points|lines|polygons|checkpoints)(\?|$)")
+    try:
+        gets.clear()
+        b = _measure(p, _known("ground_sw"), VIEWPOINTS[:2], code="merge b")["id"]
+        a = _measure(p, _known("roof_c"), VIEWPOINTS[:3], code="merge a")["id"]
+        p.page.wait_for_selector(f"#points-table tbody tr.selected[data-id='{a}']")
+        state_ids = p.page.evaluate("gsgeo.state.points.map((q) => q.id)")
+        assert state_ids[-2:] == [b, a] and len(set(state_ids)) == len(state_ids)
+        # the line: picked in the list, stored, listed with its measures
+        p.page.keyboard.press("l")
+        for pid in (a, b):
+            p.page.click(f"#points-table tbody tr[data-id='{pid}']")
+        with p.page.expect_response(_posted("lines")) as resp:
+            p.page.keyboard.press("Enter")
+        line = resp.value.json()
+        p.page.wait_for_function(f"gsgeo.state.lines.some((f) => f.id === '{line['id']}')")
+        assert line["id"] in p.page.inner_text("#features-table")
+        p.page.wait_for_timeout(300)
+        assert not [g for g in gets if refetched.match(g)], gets
+        # excluding a ray of a changes the line's measures: the lines (only) are fetched again
+        row = f"#points-table tbody tr[data-id='{a}']"
+        with p.page.expect_response(lambda r: r.url.endswith("/lines") and r.request.method == "GET"):
+            p.page.click("#point-detail button:text('exclude')")
+        p.page.wait_for_function(f"document.querySelector(\"{row} td:nth-child(8)\").textContent === '2+1✕'")
+        assert p.page.evaluate(f"gsgeo.state.points.find((q) => q.id === '{a}').excluded") == [0]
+        p.page.wait_for_timeout(300)
+        assert [g for g in gets if refetched.match(g)] == [f"{project}/lines"], gets
+        gets.clear()
+        # deleting the line, then the point
+        p.page.click(f"#features-table button[title='delete {line['id']}']")
+        p.page.wait_for_function(f"!gsgeo.state.lines.some((f) => f.id === '{line['id']}')")
+        p.page.click("#point-detail button.danger")
+        with p.page.expect_response(lambda r: r.request.method == "DELETE"):
+            p.page.click("#point-detail button.danger")
+        p.page.wait_for_selector(row, state="detached")
+        assert a not in p.page.evaluate("gsgeo.state.points.map((q) => q.id)")
+        p.page.wait_for_timeout(300)
+        assert not [g for g in gets if refetched.match(g)], gets
+        assert p.errors == []
+    finally:
+        p.close()

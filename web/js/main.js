@@ -4,6 +4,7 @@
 import { api, download, ApiError } from "./api.js";
 import { Drawer, COLORS, SCALE_95_3D, cart } from "./draw.js";
 import { applyPoint, applyDirection, norm, sub, IDENTITY16 } from "./linalg.js";
+import { upsert, usesAny, without } from "./merge.js";
 import { $, fixed, mm, h, measuresText } from "./format.js";
 import { TOOLS, activeTool, activate, handlerOf, release, toolByShortcut } from "./tools/index.js";
 
@@ -203,6 +204,50 @@ async function refreshProjectData() {
   state.polygons = polys.polygons;
   state.checkPoints = cps.check_points.length;
   renderAll();
+  await refreshAccuracy();
+}
+
+// After a store the server's answer goes into the state (merge.js); only what the server
+// derives from several objects is fetched again: the measures of the lines and polygons on a
+// changed point, and the accuracy against check points.
+
+/** Point `pt` as the server stored it (its id was `oldId` before a rename). */
+async function pointStored(pt, oldId = pt.id) {
+  state.points = upsert(state.points, pt, oldId);
+  const ids = [oldId, pt.id];
+  const pid = encodeURIComponent(state.project.id);
+  const [lines, polys] = await Promise.all([
+    usesAny(state.lines, ids) ? api("GET", `/projects/${pid}/lines`) : null,
+    usesAny(state.polygons, ids) ? api("GET", `/projects/${pid}/polygons`) : null,
+  ]);
+  if (lines) state.lines = lines.lines;
+  if (polys) state.polygons = polys.polygons;
+  renderAll();
+  await refreshAccuracy();
+}
+
+/** Point `id` is deleted (the server refuses while a line or polygon uses it). */
+async function pointDeleted(id) {
+  state.points = without(state.points, id);
+  if (state.selected === id) state.selected = null;
+  renderAll();
+  await refreshAccuracy();
+}
+
+/** Line or polygon `f` as the server stored it, with its measures. */
+function featureStored(f) {
+  if (f.kind === "line") state.lines = upsert(state.lines, f);
+  else state.polygons = upsert(state.polygons, f);
+  renderAll();
+}
+
+function featureDeleted(kind, id) {
+  if (kind === "line") state.lines = without(state.lines, id);
+  else state.polygons = without(state.polygons, id);
+  renderAll();
+}
+
+async function refreshAccuracy() {
   if (state.checkPoints) await loadAccuracy();
   else $("#accuracy").replaceChildren();
 }
@@ -333,15 +378,10 @@ const ctx = {
   updateStatus: () => updateStatus(),
   /** The active tool is done: back to the default tool. */
   done: () => release(ctx),
-  /** The server's answer to storing point `pt` (formerly `oldId`) goes into the state. */
-  pointStored: async (pt) => {
-    state.points = [...state.points.filter((q) => q.id !== pt.id), pt];
-    await refreshProjectData();
-  },
-  /** The server's answer to storing line or polygon `f` goes into the state. */
-  featureStored: async () => {
-    await refreshProjectData();
-  },
+  /** The server's answer to storing a point (formerly `oldId`) goes into the state. */
+  pointStored: (pt, oldId) => pointStored(pt, oldId),
+  /** The server's answer to storing a line or polygon goes into the state. */
+  featureStored: (f) => featureStored(f),
 };
 
 // ---------------------------------------------------------------------------------------
@@ -395,8 +435,8 @@ function selectPoint(id, fly) {
 
 async function patchPoint(id, body) {
   try {
-    await api("PATCH", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`, body);
-    await refreshProjectData();
+    const pt = await api("PATCH", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`, body);
+    await pointStored(pt, id);
   } catch (exc) { fail(exc); }
 }
 
@@ -412,8 +452,7 @@ async function deletePoint(id, button) {
   deleteArmed = null;
   try {
     await api("DELETE", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`);
-    if (state.selected === id) state.selected = null;
-    await refreshProjectData();
+    await pointDeleted(id);
     message(`Deleted ${id}.`);
   } catch (exc) { fail(exc); }
 }
@@ -499,7 +538,7 @@ async function deleteFeature(kind, id) {
   const plural = kind === "line" ? "lines" : "polygons";
   try {
     await api("DELETE", `/projects/${encodeURIComponent(state.project.id)}/${plural}/${encodeURIComponent(id)}`);
-    await refreshProjectData();
+    featureDeleted(kind, id);
   } catch (exc) { fail(exc); }
 }
 
@@ -543,7 +582,10 @@ async function importCheckPoints(ev) {
   try {
     const r = await api("POST", `/projects/${encodeURIComponent(state.project.id)}/checkpoints/import`, form);
     message(`Imported ${r.imported} check points (${r.crs}).`);
-    await refreshProjectData();
+    // an import adds or replaces check points by id: the server counts them
+    const cps = await api("GET", `/projects/${encodeURIComponent(state.project.id)}/checkpoints`);
+    state.checkPoints = cps.check_points.length;
+    await refreshAccuracy();
   } catch (exc) { fail(exc); }
 }
 
