@@ -170,3 +170,11 @@ def test_an_unknown_vertical_crs_is_about_vertical_not_crs(client, project):
     assert r.status_code == 422 and r.json()["field"] == "vertical"
     r = client.post("/api/projects", json={"name": "x", "crs": "nonsense", "vertical": "EPSG:5701"})
     assert r.status_code == 422 and r.json()["field"] == "crs"
+
+
+def test_ifov_on_some_rays_only_names_the_first_ray_without(client):
+    rays = london_rays(3, ifov=1e-3)
+    del rays[1]["ifov"]
+    r = client.post("/api/intersect", json={"rays": rays})
+    assert r.status_code == 422
+    assert r.json()["field"] == "rays[1].ifov" and "no ifov" in r.json()["message"]
