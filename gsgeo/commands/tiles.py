@@ -11,16 +11,6 @@ import sys
 from gsgeo.errors import InputError
 
 
-def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
-    try:
-        vals = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError(f"{what} expects {n} comma-separated numbers, got {text!r}") from None
-    if len(vals) != n or not all(v == v and abs(v) != float("inf") for v in vals):
-        raise InputError(f"{what} expects {n} comma-separated finite numbers, got {text!r}")
-    return vals
-
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "tiles",
@@ -77,38 +67,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def georeference_from_args(args: argparse.Namespace):
-    from gsgeo.tiles.georef import Georeference, load_matrix
-
-    chosen = [n for n, v in (("--origin", args.origin), ("--crs", args.crs),
-                             ("--transform", args.transform)) if v]
-    if len(chosen) > 1:
-        raise InputError(f"choose one georeference: {' and '.join(chosen)} were both given")
-    if args.heading and not args.origin:
-        raise InputError("--heading needs --origin")
-    if (args.offset or args.vertical or args.geoid or args.height) and not args.crs:
-        raise InputError("--offset, --height, --vertical and --geoid need --crs")
-    if args.origin:
-        return Georeference("origin", origin=_floats(args.origin, 3, "--origin"),
-                            heading=args.heading, axes=args.axes)
-    if args.crs:
-        if args.offset is None:
-            raise InputError("--crs needs --offset E,N,H (use 0,0,0 when the PLY holds full "
-                             "grid coordinates)")
-        height = "vertical" if args.vertical else "geoid" if args.geoid else "ellipsoidal"
-        g = Georeference("crs", crs=args.crs, offset=_floats(args.offset, 3, "--offset"),
-                         height=height, vertical_crs=args.vertical, geoid=args.geoid,
-                         axes=args.axes)
-        # a compound --crs switches to its vertical part; a 2-D one assumes ellipsoidal
-        if g.height == "ellipsoidal" and not args.height:
-            g.warnings.append("heights taken as ellipsoidal (no --vertical or --geoid "
-                              "given); pass --height ellipsoidal to silence this")
-        return g
-    if args.transform:
-        return Georeference("transform", matrix=load_matrix(args.transform), axes=args.axes)
-    return Georeference("none", axes=args.axes)
-
-
 def run(args: argparse.Namespace) -> int:
     # A bounded batch job that makes no reference cycles worth collecting: without this the
     # cyclic collector walks the objects numpy's import creates again and again (20-30 ms of
@@ -129,13 +87,17 @@ def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from gsgeo.tiles.build import build_tileset
+    from gsgeo.tiles.georef import Georeference
     from gsgeo.tiles.workers import keep_freed_memory
 
     keep_freed_memory()
 
     if args.workers is not None and args.workers < 1:
         raise InputError("--workers must be at least 1")
-    georef = georeference_from_args(args)
+    georef = Georeference.from_options(
+        origin=args.origin, heading=args.heading, crs=args.crs, offset=args.offset,
+        transform=args.transform, height=args.height, vertical=args.vertical, geoid=args.geoid,
+        axes=args.axes)
 
     def started() -> None:
         # the georeference's warnings, once the input and the output are known to be usable

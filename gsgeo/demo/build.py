@@ -7,8 +7,8 @@ Layout (DATA is the directory `gsgeo serve --data` uses):
                                 (EPSG:27700; height = WGS 84 ellipsoidal, as gsgeo reports)
 - ``DATA/demo/truth.json``      the same with ECEF and scene-frame coordinates, the place,
                                 the georeference and the build version
-- ``DATA/scenes/demo/``         the 3D Tiles scene written by ``gsgeo tiles --crs EPSG:27700
-                                --offset 545400,258100,12``
+- ``DATA/scenes/demo/``         the 3D Tiles scene of ``gsgeo tiles --crs EPSG:27700
+                                --offset 545400,258100,12`` (built by the same code, not the CLI)
 
 A build is reused while ``truth.json`` carries the current :data:`VERSION` and the tileset
 exists; otherwise everything is rebuilt (each file written atomically).
@@ -16,7 +16,6 @@ exists; otherwise everything is rebuilt (each file written atomically).
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
@@ -93,23 +92,34 @@ def checkpoints_csv_text(truth: list[place.TruthPoint]) -> str:
     return buf.getvalue()
 
 
-def _run_tiles(ply: Path, out: Path, progress: TextIO | None) -> dict:
-    """`gsgeo tiles PLY -o OUT --crs EPSG:27700 --offset E,N,H --height ellipsoidal` through the
-    command's own parser and run function; returns its JSON summary."""
-    from gsgeo.cli import build_parser
+def _build_scene(ply: Path, out: Path, progress: TextIO | None) -> int:
+    """The scene of `gsgeo tiles PLY -o OUT --crs EPSG:27700 --offset E,N,H --height ellipsoidal`,
+    through the same Georeference and build_tileset the command uses; returns the tile count.
+    Warnings go to `progress` as the command prints them."""
+    import numpy as np
 
-    offset = ",".join(f"{v:g}" for v in place.OFFSET)
-    argv = ["tiles", str(ply), "-o", str(out), "--crs", place.CRS, "--offset", offset,
-            "--height", "ellipsoidal", "--overwrite", "--json", "--level", "1",
-            "--max-splats", str(MAX_SPLATS_PER_TILE)]
-    if progress is None:
-        argv.append("--quiet")
-    args = build_parser().parse_args(argv)
-    buf = io.StringIO()
-    err = progress if progress is not None else io.StringIO()
-    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(err):
-        args.run(args)
-    return json.loads(buf.getvalue())
+    from gsgeo.tiles.build import build_tileset
+    from gsgeo.tiles.georef import Georeference
+    from gsgeo.tiles.workers import keep_freed_memory
+
+    keep_freed_memory()   # as `gsgeo tiles` does: the build's temporaries are reused
+    georef = Georeference.from_options(crs=place.CRS, offset=place.OFFSET, height="ellipsoidal")
+
+    def warn(messages: list[str]) -> None:
+        if progress is not None:
+            for w in messages:
+                print(f"gsgeo tiles: warning: {w}", file=progress)
+
+    def started() -> None:
+        warn(georef.warnings)
+        georef.warnings.clear()
+
+    # values out of range are refused by the build by name; numpy's warnings would add noise
+    with np.errstate(all="ignore"):
+        summary = build_tileset(ply, out, georef, max_splats=MAX_SPLATS_PER_TILE, level=1,
+                                overwrite=True, progress=progress, on_start=started)
+    warn(summary.warnings)
+    return summary.tiles
 
 
 def build_demo(data_dir: str | os.PathLike, *, force: bool = False,
@@ -136,7 +146,7 @@ def build_demo(data_dir: str | os.PathLike, *, force: bool = False,
     n = demo_splats.write_ply(p["ply"], part)
     say(f"wrote {n:,} splats to {p['ply']}; converting with gsgeo tiles "
         f"--crs {place.CRS} --offset {','.join(f'{v:g}' for v in place.OFFSET)} ...")
-    summary = _run_tiles(p["ply"], p["scene"], progress)
+    tiles = _build_scene(p["ply"], p["scene"], progress)
     truth = place.truth_points()
     _atomic_write(p["csv"], checkpoints_csv_text(truth))
     doc = {
@@ -150,12 +160,12 @@ def build_demo(data_dir: str | os.PathLike, *, force: bool = False,
         "heights": "check point heights are WGS 84 ellipsoidal heights (what gsgeo reports "
                    "for EPSG:27700 without --vertical)",
         "splats": n,
-        "tiles": summary.get("tiles"),
+        "tiles": tiles,
         "points": [asdict(t) for t in truth],
         "subsets": list(scene.SUBSETS),
     }
     _atomic_write(p["truth"], json.dumps(doc, indent=1))   # written last: marks the build done
-    say(f"scene {p['scene']} ({counted(summary.get('tiles'), 'tile')}) and {len(truth)} check "
+    say(f"scene {p['scene']} ({counted(tiles, 'tile')}) and {len(truth)} check "
         f"points in {time.monotonic() - t0:.1f} s")
     return DemoBuild(d, p["ply"], p["scene"], p["csv"], p["truth"], n, True,
                      time.monotonic() - t0)

@@ -31,6 +31,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +42,23 @@ from gsgeo.tiles.placement import AXES, Placement, RigidPlacement, rot_z
 
 #: Where a scene without georeference is put: latitude, longitude (degrees), ellipsoidal height (m).
 DEFAULT_ORIGIN = (0.0, 0.0, 0.0)
+
+def _three(value: str | Sequence[float], what: str) -> tuple[float, float, float]:
+    """Three finite numbers from "a,b,c" text or a sequence; InputError naming `what`."""
+    if isinstance(value, str):
+        try:
+            vals = tuple(float(v) for v in value.split(","))
+        except ValueError:
+            raise InputError(f"{what} expects 3 comma-separated numbers, got {value!r}") from None
+    else:
+        try:
+            vals = tuple(float(v) for v in value)
+        except (TypeError, ValueError):
+            raise InputError(f"{what} expects 3 numbers, got {value!r}") from None
+    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
+        raise InputError(f"{what} expects 3 comma-separated finite numbers, got {value!r}")
+    return vals
+
 
 def load_matrix(path: str | os.PathLike) -> np.ndarray:
     """Read a 4x4 local-to-ECEF matrix from JSON: 16 numbers column-major (3D Tiles order),
@@ -99,6 +117,47 @@ class Georeference:
     matrix: np.ndarray | None = None         # 4x4 input -> ECEF (row-major numpy)
     axes: str = "z-up"
     warnings: list[str] = field(default_factory=list)
+
+    @classmethod
+    def from_options(cls, *, origin: str | Sequence[float] | None = None, heading: float = 0.0,
+                     crs: str | None = None, offset: str | Sequence[float] | None = None,
+                     transform: str | os.PathLike | np.ndarray | None = None,
+                     height: str | None = None, vertical: str | None = None,
+                     geoid: str | None = None, axes: str = "z-up") -> Georeference:
+        """The georeference of `gsgeo tiles`'s options, checked as the command checks them.
+
+        origin "LAT,LON,H" (degrees, metres; text or 3 numbers) with heading (degrees clockwise
+        from true north of the input +y axis); or crs with offset "E,N,H" (grid units) and at
+        most one of height "ellipsoidal", vertical (a vertical CRS) or geoid (a geoid grid
+        file); or transform (a JSON file of a 4x4 local-to-ECEF matrix, or the matrix).
+        Nothing: the default origin, with a warning. Messages name the command's options.
+        """
+        chosen = [n for n, v in (("--origin", origin), ("--crs", crs), ("--transform", transform))
+                  if v is not None and not (isinstance(v, str) and not v)]
+        if len(chosen) > 1:
+            raise InputError(f"choose one georeference: {' and '.join(chosen)} were both given")
+        if heading and not origin:
+            raise InputError("--heading needs --origin")
+        if (offset or vertical or geoid or height) and not crs:
+            raise InputError("--offset, --height, --vertical and --geoid need --crs")
+        if origin:
+            return cls("origin", origin=_three(origin, "--origin"), heading=heading, axes=axes)
+        if crs:
+            if offset is None:
+                raise InputError("--crs needs --offset E,N,H (use 0,0,0 when the PLY holds full "
+                                 "grid coordinates)")
+            kind = "vertical" if vertical else "geoid" if geoid else "ellipsoidal"
+            g = cls("crs", crs=crs, offset=_three(offset, "--offset"), height=kind,
+                    vertical_crs=vertical, geoid=geoid, axes=axes)
+            # a compound --crs switches to its vertical part; a 2-D one assumes ellipsoidal
+            if g.height == "ellipsoidal" and not height:
+                g.warnings.append("heights taken as ellipsoidal (no --vertical or --geoid "
+                                  "given); pass --height ellipsoidal to silence this")
+            return g
+        if transform is not None:
+            m = transform if isinstance(transform, np.ndarray) else load_matrix(transform)
+            return cls("transform", matrix=m, axes=axes)
+        return cls("none", axes=axes)
 
     def __post_init__(self) -> None:
         if self.axes not in AXES:
