@@ -167,6 +167,9 @@ def _read_geojson(data: bytes) -> list[CheckPointRow]:
 
 def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
     import pyogrio
+    import shapely
+    from pyogrio import raw
+    from pyproj import CRS
     from pyproj.exceptions import CRSError
 
     from gsgeo.crs.resolve import network_off
@@ -183,19 +186,22 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
             point_layers = [name for name, gt in layers if gt and "point" in str(gt).lower()]
             if not point_layers:
                 raise InputError("the GeoPackage has no point layer")
-            df = pyogrio.read_dataframe(io.BytesIO(data), layer=point_layers[0],
-                                        max_features=MAX_CHECK_POINTS + 1)
-            cid = _pick([str(c) for c in df.columns if c != "geometry"], ID_COLUMNS)
+            layer = point_layers[0]
+            meta, _, wkb, columns = raw.read(io.BytesIO(data), layer=layer,
+                                             max_features=MAX_CHECK_POINTS + 1)
+            names = [str(c) for c in meta["fields"]]
+            cid = _pick(names, ID_COLUMNS)
             if cid is None:
-                raise InputError(f"layer '{point_layers[0]}' has no point_id, id or name column")
-            file_crs = df.crs
+                raise InputError(f"layer '{layer}' has no point_id, id or name column")
+            geoms = shapely.from_wkb(wkb)
     except InputError:
         raise
-    except Exception as exc:  # GDAL raises its own error types for unreadable files
+    except Exception as exc:  # GDAL and GEOS raise their own error types for unreadable files
         raise InputError(f"cannot be read as a GeoPackage: {exc}") from None
+    ids = columns[names.index(cid)]
     rows: list[CheckPointRow] = []
-    for i, (pid, geom) in enumerate(zip(df[cid], df.geometry, strict=True)):
-        at = f"layer {point_layers[0]} feature {i}"
+    for i, (pid, geom) in enumerate(zip(ids, geoms, strict=True)):
+        at = f"layer {layer} feature {i}"
         if geom is None or geom.geom_type != "Point" or geom.is_empty:
             raise InputError("expected a Point geometry", field=at)
         z = geom.z if geom.has_z else None
@@ -206,8 +212,9 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
                                   _num(None if z is None else float(z), f"{at} z", True)))
         _count(rows)
     crs = None
-    if file_crs is not None:
+    if meta.get("crs"):
         try:
+            file_crs = CRS.from_user_input(meta["crs"])
             epsg = file_crs.to_epsg()
             crs = f"EPSG:{epsg}" if epsg else file_crs.to_wkt()
         except CRSError as exc:
