@@ -1,5 +1,6 @@
-// gsgeo measuring workplace: scene and project, multi-ray point measurement, points,
-// lines and polygons, check points, export. Talks to the gsgeo server's /api.
+// gsgeo measuring workplace: scene and project, the points list, lines and polygons, check
+// points, export. Talks to the gsgeo server's /api. Measuring is done by the tools
+// (tools/index.js), to which clicks, keys and the panels' buttons go.
 
 import { api, download, ApiError } from "./api.js";
 import { Drawer, COLORS, SCALE_95_3D, cart } from "./draw.js";
@@ -369,19 +370,12 @@ function solveSettings() {
 
 function confScale() { return state.conf === "95" ? SCALE_95_3D : 1; }
 
-/** What the tools (tools/*.js) may use of the workplace. */
+/** What the tools (tools/*.js) may use of the workplace. pointStored(pt, oldId) and
+ *  featureStored(f) take the server's answer to a store; done() returns to the default tool. */
 const ctx = {
   state, viewer, draw, message, fail, modelMatrix, solveSettings, confScale,
-  pointById: (id) => pointById(id),
-  nearestPoint: (pos, tol) => nearestPoint(pos, tol),
-  selectPoint: (id, fly) => selectPoint(id, fly),
-  updateStatus: () => updateStatus(),
-  /** The active tool is done: back to the default tool. */
+  pointById, nearestPoint, selectPoint, updateStatus, pointStored, featureStored,
   done: () => release(ctx),
-  /** The server's answer to storing a point (formerly `oldId`) goes into the state. */
-  pointStored: (pt, oldId) => pointStored(pt, oldId),
-  /** The server's answer to storing a line or polygon goes into the state. */
-  featureStored: (f) => featureStored(f),
 };
 
 // ---------------------------------------------------------------------------------------
