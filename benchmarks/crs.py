@@ -5,7 +5,7 @@
 Prints a markdown table (paste it into benchmarks/README.md, section "CRS"). Points are
 scattered over 2 km around a site; covariances are random SPD 3x3 matrices.
 
---calibration N also runs N end-to-end trials through gsgeo.crs.pipeline.measure_point (a
+--calibration N also runs N end-to-end trials through gsgeo.measure.point.measure_point (a
 known EPSG:27700 point, noisy viewer rays with a modelMatrix) and draws the squared
 Mahalanobis distances of the grid errors against chi-square(3) into
 benchmarks/crs_calibration.png.
@@ -24,7 +24,7 @@ import numpy as np
 
 from gsgeo.crs.frames import EnuFrame, geodetic_to_ecef
 from gsgeo.crs.grid import to_grid, to_grid_many
-from gsgeo.crs.pipeline import measure_point
+from gsgeo.measure import measure_point
 from gsgeo.session import Ray, SessionPoint
 
 

@@ -25,8 +25,8 @@ import numpy as np
 
 from gsgeo.crs.frames import EnuFrame, geodetic_to_ecef
 from gsgeo.crs.grid import to_grid_many
-from gsgeo.crs.pipeline import Measurement
 from gsgeo.export import write_measurements
+from gsgeo.measure import Measurement
 from gsgeo.solve import IntersectionResult, intersect_batch
 
 CRS = "EPSG:27700"

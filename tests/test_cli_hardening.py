@@ -23,7 +23,7 @@ from servertools import london_rays
 from gsgeo import cli
 from gsgeo.cli import main
 from gsgeo.errors import InputError
-from gsgeo.export.features import polygon_measures
+from gsgeo.measure.features import polygon_measures
 from gsgeo.session import parse_session
 from gsgeo.solve import intersect, intersect_batch
 from gsgeo.store import Projects, open_store

@@ -12,7 +12,7 @@ from conftest import REPO
 from pyproj import Transformer
 
 from gsgeo.cli import main
-from gsgeo.crs.pipeline import RECORD_KEYS
+from gsgeo.measure.schema import RECORD_KEYS
 
 EXAMPLE = REPO / "examples" / "session.json"
 

@@ -16,8 +16,8 @@ from pyproj import Proj, Transformer
 from gsgeo.crs.frames import EnuFrame
 from gsgeo.crs.grid import to_grid_many
 from gsgeo.crs.modelmatrix import column_major, rendered_to_georeferenced
-from gsgeo.crs.pipeline import RECORD_KEYS, Measurement, MeasurementFailure, measure_point, measure_session
 from gsgeo.errors import CRSError, InputError
+from gsgeo.measure import RECORD_KEYS, Measurement, MeasurementFailure, measure_point, measure_session
 from gsgeo.session import Ray, Session, SessionPoint
 from gsgeo.solve import intersect_batch
 

@@ -30,11 +30,11 @@ from export_helpers import (
 )
 from pyproj import CRS, Transformer
 
-from gsgeo.crs.pipeline import RECORD_KEYS, Measurement, measure_session
 from gsgeo.errors import CRSError, GeometryError, InputError
 from gsgeo.export import write_measurements
 from gsgeo.export.csvfile import CSV_COLUMNS
 from gsgeo.export.tables import ELLIPSE_VERTICES, POINT_TYPES
+from gsgeo.measure import RECORD_KEYS, Measurement, measure_session
 
 EGM96 = Path("/usr/share/proj/egm96_15.gtx")
 ALL_LAYERS = {"points", "rays", "lines", "polygons", "error_ellipses"}
@@ -422,7 +422,7 @@ def test_csv_text_equals_the_csv_module_output(odn, tmp_path, monkeypatch, chunk
 def test_empty_and_unsolved(tmp_path):
     with pytest.raises(InputError, match="nothing to export"):
         write_measurements(tmp_path / "a.gpkg", [])
-    from gsgeo.crs.pipeline import MeasurementFailure
+    from gsgeo.measure import MeasurementFailure
 
     with pytest.raises(InputError, match=r"nothing to export.*1 point\(s\) could not be solved"):
         write_measurements(tmp_path / "a.csv", [MeasurementFailure("P1", "rays are parallel")])

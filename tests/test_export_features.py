@@ -1,4 +1,4 @@
-"""gsgeo.export.features: lengths, areas, perimeters and their propagated sigmas."""
+"""gsgeo.measure.features: lengths, areas, perimeters and their propagated sigmas."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gsgeo.errors import GeometryError, InputError
-from gsgeo.export.features import line_measures, polygon_measures, ring_self_intersection
+from gsgeo.measure.features import line_measures, polygon_measures, ring_self_intersection
 
 E0, N0 = 530_000.0, 180_000.0  # national-grid sized coordinates
 
@@ -163,7 +163,7 @@ def _nan_none(v):
 def test_many_equal_single_feature_results(rng):
     """line_measures_many / polygon_measures_many give line_measures / polygon_measures' values
     (feet, unknown heights and covariances included) and flag exactly the features they reject."""
-    from gsgeo.export.features import line_measures_many, polygon_measures_many
+    from gsgeo.measure.features import line_measures_many, polygon_measures_many
 
     lines, polys = [], []
     for k in range(60):

@@ -1,4 +1,4 @@
-"""POST /api/intersect against gsgeo.crs.pipeline, and the solver threads it runs on."""
+"""POST /api/intersect against gsgeo.measure.point, and the solver threads it runs on."""
 
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ with warnings.catch_warnings():
     from fastapi.testclient import TestClient
 
 import gsgeo.server.api as api
-from gsgeo.crs.pipeline import measure_point
 from gsgeo.errors import InputError
+from gsgeo.measure import measure_point
 from gsgeo.server.app import ServerConfig, create_app
 from gsgeo.server.intersect_pool import IntersectPool
 from gsgeo.session import parse_point
@@ -32,7 +32,7 @@ def client(tmp_path):
 
 
 def expected(body: dict) -> dict:
-    """What gsgeo.crs.pipeline gives for the request's rays, called here directly."""
+    """What gsgeo.measure.point gives for the request's rays, called here directly."""
     pt = parse_point({"id": body.get("id", "P"), "code": body.get("code", ""),
                       "description": body.get("description", ""), "rays": body["rays"]}, "p")
     m = measure_point(pt, crs=body.get("crs"), vertical=body.get("vertical"),

@@ -1,7 +1,7 @@
 """`gsgeo solve SESSION.json`: intersect the rays of every point in a session.
 
 With a grid CRS (``--crs`` or the session's ``crs``) every point goes through
-gsgeo.crs.pipeline.measure_session and is printed as easting, northing, height with sigmas and
+gsgeo.measure.point.measure_session and is printed as easting, northing, height with sigmas and
 the PROJ operation used; without one the points are printed in the rays' own frame.
 """
 
@@ -14,11 +14,11 @@ import sys
 from pathlib import Path
 
 from gsgeo import limits
-from gsgeo.crs.pipeline import MeasurementFailure, measure_session
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.export.atomic import check_target
 from gsgeo.export.writer import FORMATS as EXPORT_FORMATS
 from gsgeo.export.writer import format_for, write_session_results
+from gsgeo.measure import MeasurementFailure, measure_session
 from gsgeo.session import Session, load_session, ray_arrays
 from gsgeo.solve import SCALE_95_1D, intersect
 

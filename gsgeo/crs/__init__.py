@@ -1,5 +1,5 @@
-"""gsgeo.crs: frames (ECEF <-> ENU), grid output with covariance,
-vertical datums and the measurement pipeline. Knows PROJ, never HTTP.
+"""gsgeo.crs: frames (ECEF <-> ENU), grid output with covariance and vertical datums.
+Knows PROJ, never HTTP; the measurement pipeline that uses it is gsgeo.measure.
 
 PROJ never uses the network from gsgeo: every CRS is parsed by gsgeo.crs.resolve.parse_crs
 and every transformer built by gsgeo.crs.transformers, and both call
@@ -10,14 +10,12 @@ Importing the package alone loads no PROJ, so gsgeo.crs.ellipsoid (numpy only) i
 from importlib import import_module
 
 # Names are loaded on first use (PEP 562): importing one submodule, e.g. gsgeo.crs.frames for
-# `gsgeo tiles`, then does not load the measurement pipeline and everything it needs.
+# `gsgeo tiles`, then does not load PROJ and everything grid output needs.
 _WHERE = {
     "EnuFrame": "frames", "ecef_to_geodetic": "frames", "enu_rotation": "frames",
     "geodetic_to_ecef": "frames",
     "GridPoint": "grid", "GridPoints": "grid", "analytic_jacobian": "grid", "to_grid": "grid",
     "to_grid_many": "grid",
-    "Measurement": "pipeline", "MeasurementFailure": "pipeline", "measure_point": "pipeline",
-    "measure_session": "pipeline",
     "network_off": "resolve", "grid_crs": "resolve", "parse_crs": "resolve",
     "source_crs": "resolve",
 }
@@ -39,15 +37,11 @@ __all__ = [
     "EnuFrame",
     "GridPoint",
     "GridPoints",
-    "Measurement",
-    "MeasurementFailure",
     "analytic_jacobian",
     "ecef_to_geodetic",
     "enu_rotation",
     "geodetic_to_ecef",
     "grid_crs",
-    "measure_point",
-    "measure_session",
     "network_off",
     "parse_crs",
     "source_crs",

@@ -1,11 +1,12 @@
 """gsgeo.export: measured points, lines and polygons to GeoPackage, GeoJSON and CSV.
 
 One schema for all formats (the README's "Point schema"); see `write_measurements`.
-`gsgeo.export.features` holds the CRS-free length/area maths with propagated sigmas.
+The CRS-free length/area maths with propagated sigmas is gsgeo.measure.features (re-exported
+here for the writers' users).
 """
 
-from gsgeo.export.features import LineMeasures, PolygonMeasures, line_measures, polygon_measures
 from gsgeo.export.writer import FORMATS, format_for, write_measurements, write_session_results
+from gsgeo.measure.features import LineMeasures, PolygonMeasures, line_measures, polygon_measures
 
 __all__ = [
     "FORMATS",

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import orjson
 
-from gsgeo.crs.pipeline import RECORD_KEYS
 from gsgeo.export.tables import ExportData
+from gsgeo.measure.schema import RECORD_KEYS
 
 FIRST = ("point_id", "easting", "northing", "height", "code")
 #: The CSV's columns, in order.

@@ -1,12 +1,12 @@
 """What an export holds, as column arrays: points, rays, lines, polygons, error ellipses, check points.
 
-`collect` turns measurements (gsgeo.crs.pipeline.Measurement objects, or their ``to_dict()``
+`collect` turns measurements (gsgeo.measure.point.Measurement objects, or their ``to_dict()``
 JSON as the project store keeps it) plus lines and polygons given by point ids into an
 `ExportData` that the GeoPackage, GeoJSON and CSV writers share, so every format carries the
 same numbers. Everything is validated here, before a file is touched.
 
 Coordinates are in the grid CRS of the measurements (E, N, H in the CRS's units); sigmas and
-covariances in metres and m²; lengths and areas in metres and m² (gsgeo.export.features).
+covariances in metres and m²; lengths and areas in metres and m² (gsgeo.measure.features).
 """
 
 from __future__ import annotations
@@ -21,15 +21,15 @@ from typing import Any
 
 import numpy as np
 
-from gsgeo.crs.pipeline import RECORD_KEYS
 from gsgeo.crs.resolve import grid_crs, parse_crs
 from gsgeo.errors import CRSError, GeometryError, GsgeoError, InputError
-from gsgeo.export.features import (
+from gsgeo.measure.features import (
     line_measures,
     line_measures_many,
     polygon_measures,
     polygon_measures_many,
 )
+from gsgeo.measure.schema import RECORD_KEYS
 
 #: Column types of the point schema (the README's "Point schema"): 'str', 'float' or 'int'.
 POINT_TYPES: dict[str, str] = {k: "float" for k in RECORD_KEYS}

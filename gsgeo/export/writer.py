@@ -40,7 +40,7 @@ def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
     ----------
     path : target file; written atomically (temporary file beside it, then os.replace), so an
         error leaves neither a partial file nor a damaged earlier export.
-    measurements : gsgeo.crs.pipeline.Measurement objects or their ``to_dict()`` JSON, all in
+    measurements : gsgeo.measure.point.Measurement objects or their ``to_dict()`` JSON, all in
         one grid CRS. MeasurementFailure entries are skipped (a line through one is an error).
     lines, polygons : ordered point ids, each as a session Feature (``id``, ``points``), a store
         record (``id``, ``point_ids``), a dict with those keys or a tuple (id, [ids]).

@@ -103,7 +103,7 @@ def info(request: Request) -> dict[str, Any]:
 async def intersect(body: m.IntersectRequest, request: Request) -> dict[str, Any]:
     """One point's rays (session-JSON shape) and solving options -> the solved point:
     grid coordinates and covariance (when ``crs`` is given), WGS 84 position, sigma0,
-    residuals per ray, outlier flags and warnings (gsgeo.crs.pipeline ``to_dict``)."""
+    residuals per ray, outlier flags and warnings (gsgeo.measure.point ``to_dict``)."""
     state = request.app.state
     return await state.intersect_pool.run(intersect_request, body, state.config.data_dir)
 

@@ -169,10 +169,9 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
     import pyogrio
     import shapely
     from pyogrio import raw
-    from pyproj import CRS
-    from pyproj.exceptions import CRSError
 
-    from gsgeo.crs.resolve import network_off
+    from gsgeo.crs.resolve import network_off, parse_crs
+    from gsgeo.errors import CRSError
 
     network_off()  # GDAL's PROJ reads the file's CRS: no grid downloads
 
@@ -214,7 +213,7 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
     crs = None
     if meta.get("crs"):
         try:
-            file_crs = CRS.from_user_input(meta["crs"])
+            file_crs = parse_crs(meta["crs"])
             epsg = file_crs.to_epsg()
             crs = f"EPSG:{epsg}" if epsg else file_crs.to_wkt()
         except CRSError as exc:

@@ -1,5 +1,5 @@
 """Measuring a project's point: its rays (session-JSON dicts, as stored) with the project's
-settings (crs, vertical or geoid, source_crs, sigma_px) through gsgeo.crs.pipeline.
+settings (crs, vertical or geoid, source_crs, sigma_px) through gsgeo.measure.point.
 
 Words: *solve* is the least-squares maths (gsgeo.solve); *measure* is that plus the CRS path
 (rays to grid coordinates), as done here; *re-measure* is measuring stored points again, e.g.
@@ -65,8 +65,8 @@ def find_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
 
 def measure(point: SessionPoint, settings: dict[str, Any], excluded: list[int],
             data_dir: Path | None = None):
-    """The gsgeo.crs.pipeline Measurement of ``point`` with a project's ``settings``."""
-    from gsgeo.crs.pipeline import measure_point
+    """The gsgeo.measure.point Measurement of ``point`` with a project's ``settings``."""
+    from gsgeo.measure import measure_point
 
     return measure_point(point, crs=settings.get("crs"), vertical=settings.get("vertical"),
                          geoid=find_geoid(settings.get("geoid"), data_dir),

@@ -618,10 +618,10 @@ def check_points_in_grid(cps: list[CheckPointRecord], project: Project,
 def feature_measures(f: FeatureRecord, points: dict[str, PointRecord],
                      project: Project) -> dict[str, Any]:
     """Lengths (line) or area and perimeter (polygon) with 1-sigma values, in metres and m²,
-    from the points' grid coordinates and covariances (gsgeo.export.features); an ``error``
+    from the points' grid coordinates and covariances (gsgeo.measure.features); an ``error``
     entry says why they cannot be computed."""
     from gsgeo.crs.resolve import grid_crs
-    from gsgeo.export.features import line_measures, polygon_measures
+    from gsgeo.measure.features import line_measures, polygon_measures
 
     recs = []
     for q in f.point_ids:

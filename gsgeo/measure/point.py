@@ -1,4 +1,4 @@
-"""The measurement pipeline: a session point's rays -> a georeferenced point in the grid.
+"""The measurement pipeline: a point's rays -> a georeferenced point in the grid.
 
 rendered ECEF rays --(inverse of each ray's modelMatrix)--> georeferenced ECEF
 --(pyproj topocentric at a provisional point)--> local ENU --gsgeo.solve.intersect-->
@@ -11,139 +11,21 @@ millimetres of the origin and the ENU solution is well conditioned.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
 from gsgeo import limits
 from gsgeo.crs.frames import EnuFrame
-from gsgeo.crs.grid import GridPoint, to_grid, to_grid_many
+from gsgeo.crs.grid import to_grid, to_grid_many
 from gsgeo.crs.modelmatrix import rendered_to_georeferenced
 from gsgeo.crs.resolve import grid_crs
 from gsgeo.crs.resolve import source_crs as resolve_source
 from gsgeo.crs.transformers import transformer
 from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.measure.schema import Measurement, MeasurementFailure, now_utc
 from gsgeo.session import Session, SessionPoint, ray_arrays
-from gsgeo.solve import IntersectionResult, intersect
-
-#: Keys of the point schema (the README's CSV columns), in order.
-RECORD_KEYS = (
-    "point_id", "code", "description", "easting", "northing", "height", "height_type",
-    "vertical_datum", "crs", "sigma_e", "sigma_n", "sigma_h", "cov_ee", "cov_en", "cov_eh",
-    "cov_nn", "cov_nh", "cov_hh", "ellipse_major_95", "ellipse_minor_95",
-    "ellipse_bearing_deg", "sigma0", "n_rays", "max_angle_deg", "rms_m", "max_residual_px",
-    "lon", "lat", "h_wgs84", "operation", "operation_accuracy_m", "measured_at",
-)
-
-
-def _now() -> str:
-    return datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
-
-
-@dataclass
-class Measurement:
-    """A measured point: the ENU solution, the georeferenced ECEF point and the grid point."""
-
-    point_id: str
-    code: str
-    description: str
-    solution: IntersectionResult  # in the local ENU frame
-    enu_origin_ecef: np.ndarray  # (3,)
-    point_ecef: np.ndarray  # (3,) georeferenced ECEF on source_crs, m
-    cov_ecef: np.ndarray  # (3, 3) m^2
-    grid: GridPoint | None
-    ray_origins_ecef: np.ndarray  # (N, 3) georeferenced
-    ray_directions_ecef: np.ndarray  # (N, 3) georeferenced, unit
-    ray_origins_grid: np.ndarray | None  # (N, 3) E, N, H of the camera centres
-    excluded: np.ndarray  # (N,) bool
-    measured_at: str
-    source_crs: str = "EPSG:4978"
-    residuals_m: np.ndarray | None = None  # (N,) every ray, excluded ones too
-    residuals_px: np.ndarray | None = None  # (N,) angular model only
-    outliers: np.ndarray | None = None  # (N,) bool; excluded rays False
-    ifov: np.ndarray | None = None  # (N,)
-    lon: float | None = None  # WGS 84, degrees
-    lat: float | None = None
-    h_wgs84: float | None = None
-    warnings: list[str] = field(default_factory=list)
-
-    @property
-    def n_rays(self) -> int:
-        """Rays used in the solution (excluded ones not counted)."""
-        return int((~self.excluded).sum())
-
-    def record(self) -> dict:
-        """The point-schema row, keys in order; grid fields None without a grid."""
-        g = self.grid
-        s = self.solution
-        rec = dict.fromkeys(RECORD_KEYS)
-        rec.update(point_id=self.point_id, code=self.code, description=self.description,
-                   sigma0=float(s.sigma0), n_rays=self.n_rays,
-                   max_angle_deg=float(s.max_angle_deg), rms_m=float(s.rms_m),
-                   max_residual_px=(None if s.residuals_px is None
-                                    else float(np.max(s.residuals_px))),
-                   lon=self.lon, lat=self.lat, h_wgs84=self.h_wgs84,
-                   measured_at=self.measured_at)
-        if g is not None:
-            c = g.covariance
-            rec.update(
-                easting=g.easting, northing=g.northing, height=g.height,
-                height_type=g.height_type, vertical_datum=g.vertical_datum, crs=g.crs,
-                sigma_e=g.sigma_e, sigma_n=g.sigma_n, sigma_h=g.sigma_h,
-                cov_ee=float(c[0, 0]), cov_en=float(c[0, 1]), cov_eh=float(c[0, 2]),
-                cov_nn=float(c[1, 1]), cov_nh=float(c[1, 2]), cov_hh=float(c[2, 2]),
-                ellipse_major_95=g.ellipse_major_95, ellipse_minor_95=g.ellipse_minor_95,
-                ellipse_bearing_deg=g.ellipse_bearing_deg, operation=g.operation,
-                operation_accuracy_m=g.operation_accuracy_m,
-            )
-        return rec
-
-    def to_dict(self) -> dict:
-        """record() plus rays, warnings, 95 % ellipsoid axes and the ENU solution (JSON-ready)."""
-        out = self.record()
-        rays = []
-        for i in range(self.excluded.shape[0]):
-            rays.append({
-                "index": i,
-                "origin_ecef": self.ray_origins_ecef[i].tolist(),
-                "direction_ecef": self.ray_directions_ecef[i].tolist(),
-                "origin_grid": (None if self.ray_origins_grid is None
-                                else self.ray_origins_grid[i].tolist()),
-                "ifov": None if self.ifov is None else float(self.ifov[i]),
-                "residual_px": (None if self.residuals_px is None
-                                else float(self.residuals_px[i])),
-                "residual_m": None if self.residuals_m is None else float(self.residuals_m[i]),
-                "outlier": bool(self.outliers[i]) if self.outliers is not None else False,
-                "excluded": bool(self.excluded[i]),
-            })
-        out["rays"] = rays
-        out["warnings"] = list(self.warnings)
-        out["source_crs"] = self.source_crs
-        out["ellipsoid_axes_95"] = (None if self.grid is None or self.grid.ellipsoid_axes_95 is None
-                                    else self.grid.ellipsoid_axes_95.tolist())
-        out["point_ecef"] = self.point_ecef.tolist()
-        out["cov_ecef"] = self.cov_ecef.tolist()
-        out["enu"] = {
-            "origin_ecef": self.enu_origin_ecef.tolist(),
-            "point": self.solution.point.tolist(),
-            "covariance": self.solution.covariance.tolist(),
-            "model": self.solution.model,
-            "dof": int(self.solution.dof),
-        }
-        return out
-
-
-@dataclass
-class MeasurementFailure:
-    """A point that could not be measured, with the reason."""
-
-    point_id: str
-    error: str
-
-    def to_dict(self) -> dict:
-        return {"point_id": self.point_id, "error": self.error}
+from gsgeo.solve import intersect
 
 
 def _provisional(o: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -269,7 +151,7 @@ def measure_point(
         ray_directions_ecef=d,
         ray_origins_grid=origins_grid,
         excluded=mask,
-        measured_at=_now(),
+        measured_at=now_utc(),
         source_crs=src.id,
         residuals_m=res_m,
         residuals_px=res_px,

@@ -1,0 +1,24 @@
+"""gsgeo.measure: the measurement core between the geodesy (gsgeo.crs, gsgeo.solve) and
+everything that keeps or shows results (gsgeo.export, gsgeo.store, gsgeo.server).
+
+- ``point``: a point's rays (rendered ECEF) -> Measurement in ECEF and the grid CRS;
+- ``schema``: Measurement, its point-schema record (RECORD_KEYS), MeasurementFailure;
+- ``features``: lengths, areas and perimeters of lines and polygons with propagated sigmas
+  (plain (N, 3) / (N, 3, 3) arrays in grid units, no CRS).
+"""
+
+from gsgeo.measure.features import LineMeasures, PolygonMeasures, line_measures, polygon_measures
+from gsgeo.measure.point import measure_point, measure_session
+from gsgeo.measure.schema import RECORD_KEYS, Measurement, MeasurementFailure
+
+__all__ = [
+    "RECORD_KEYS",
+    "LineMeasures",
+    "Measurement",
+    "MeasurementFailure",
+    "PolygonMeasures",
+    "line_measures",
+    "measure_point",
+    "measure_session",
+    "polygon_measures",
+]
