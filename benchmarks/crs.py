@@ -24,8 +24,8 @@ import numpy as np
 
 from gsgeo.crs.frames import EnuFrame, geodetic_to_ecef
 from gsgeo.crs.grid import to_grid, to_grid_many
-from gsgeo.measure import measure_point
 from gsgeo.session import Ray, SessionPoint
+from gsgeo.session import measure_session_point as measure_point
 
 
 def best(fn, repeat: int) -> tuple[float, float]:

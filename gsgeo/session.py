@@ -13,6 +13,7 @@ and directions and the id rule come from :mod:`gsgeo.limits`.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,8 @@ import orjson
 
 from gsgeo import limits
 from gsgeo.errors import InputError, join_field
+from gsgeo.measure import Measurement, MeasurementFailure, Rays, SolveSettings, measure_points
+from gsgeo.measure import measure_point as measure_rays
 
 #: Largest session file read, bytes (10 000 points of 10 rays take about 5 MB).
 MAX_SESSION_BYTES = 200 * 1024 * 1024
@@ -58,10 +61,27 @@ class Ray:
 
 @dataclass
 class SessionPoint:
+    """A point of the session: id, code, description and its rays.
+
+    ``typed`` is the validated :class:`~gsgeo.measure.Rays` when the point was parsed from
+    JSON; :meth:`to_rays` builds (and validates) it for a point made in code.
+    """
+
     id: str
     rays: list[Ray]
     code: str = ""
     description: str = ""
+    typed: Rays | None = field(default=None, repr=False, compare=False)
+
+    def to_rays(self) -> Rays:
+        """The point's rays as the typed core (validated once)."""
+        if self.typed is None:
+            self.typed = Rays.from_columns(
+                [r.origin for r in self.rays], [r.direction for r in self.rays],
+                [r.ifov for r in self.rays], [r.pixel for r in self.rays],
+                [r.viewport for r in self.rays],
+                [None if r.model_matrix is None else r.model_matrix for r in self.rays])
+        return self.typed
 
 
 @dataclass
@@ -164,9 +184,9 @@ def _text(value: Any, field: str | None, default: str = "") -> str:
     return str(value)
 
 
-def parse_ray(doc: Any, field: str = "ray") -> Ray:
-    """Validate one ray object of the session JSON; errors name ``field`` (the ray's JSON
-    path) and the member inside it, e.g. ``ray.direction``; ``field=""`` names members alone."""
+def _ray_members(doc: Any, field: str) -> Ray:
+    """The JSON shape of one ray object (numbers, lengths, members); ranges are the typed
+    core's (gsgeo.measure.Rays)."""
     if not isinstance(doc, dict):
         raise InputError("expected an object with origin and direction", field=field)
     for key in ("origin", "direction"):
@@ -175,16 +195,10 @@ def parse_ray(doc: Any, field: str = "ray") -> Ray:
     at = {key: join_field(field, key)
           for key in ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")}
     origin = _vector(doc["origin"], 3, at["origin"])
-    problem = limits.origin_problem(origin)
-    if problem:
-        raise InputError(problem, field=at["origin"])
     direction = _vector(doc["direction"], 3, at["direction"])
-    problem = limits.direction_problem(direction)
-    if problem:
-        raise InputError(problem, field=at["direction"])
     ifov = None
     if doc.get("ifov") is not None:
-        ifov = limits.ifov(_number(doc["ifov"], at["ifov"]), at["ifov"])
+        ifov = _number(doc["ifov"], at["ifov"])
     pixel = viewport = mm = None
     if doc.get("pixel") is not None:
         pixel = tuple(_vector(doc["pixel"], 2, at["pixel"]).tolist())
@@ -192,10 +206,31 @@ def parse_ray(doc: Any, field: str = "ray") -> Ray:
         viewport = tuple(_vector(doc["viewport"], 2, at["viewport"]).tolist())
     if doc.get("model_matrix") is not None:
         mm = _vector(doc["model_matrix"], 16, at["model_matrix"])
-        if mm[3] != 0 or mm[7] != 0 or mm[11] != 0 or mm[15] == 0:
-            raise InputError("not an affine 4x4 matrix in column-major order (elements 3, 7, "
-                             "11 must be 0 and element 15 non-zero)", field=at["model_matrix"])
     return Ray(origin, direction, ifov, pixel, viewport, mm)
+
+
+def parse_rays(docs: Sequence[Any], field: str = "") -> tuple[list[Ray], Rays]:
+    """Validate ray objects of the session JSON: their JSON shape here, their ranges once in
+    gsgeo.measure.Rays. Errors name ``field`` (the JSON path of the point) and the ray's
+    member inside it, e.g. ``rays[1].direction``."""
+    rays = [_ray_members(r, join_field(field, f"rays[{i}]")) for i, r in enumerate(docs)]
+    try:
+        typed = SessionPoint("", rays).to_rays()
+    except InputError as exc:
+        raise exc.within(field) if field else exc from None
+    return rays, typed
+
+
+def parse_ray(doc: Any, field: str = "ray") -> Ray:
+    """Validate one ray object of the session JSON; errors name ``field`` (the ray's JSON
+    path) and the member inside it, e.g. ``ray.direction``; ``field=""`` names members alone."""
+    ray = _ray_members(doc, field)
+    try:
+        SessionPoint("", [ray]).to_rays()
+    except InputError as exc:
+        member = (exc.field or "").removeprefix("rays[0]").lstrip(".")
+        raise exc.at(join_field(field, member) if member else field or None) from None
+    return ray
 
 
 def parse_point(doc: Any, field: str = "point") -> SessionPoint:
@@ -210,11 +245,13 @@ def parse_point(doc: Any, field: str = "point") -> SessionPoint:
     if not isinstance(rays, list):
         raise InputError(f"expected a list of rays, got {_describe(rays)}",
                          field=join_field(field, "rays"))
+    parsed, typed = parse_rays(rays, field)
     return SessionPoint(
         id=pid,
-        rays=[parse_ray(r, join_field(field, f"rays[{i}]")) for i, r in enumerate(rays)],
+        rays=parsed,
         code=_text(doc.get("code"), join_field(field, "code")),
         description=_text(doc.get("description"), join_field(field, "description")),
+        typed=typed,
     )
 
 
@@ -265,20 +302,39 @@ def parse_session(doc: Any) -> Session:
     )
 
 
-def ray_arrays(point: SessionPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Origins (N, 3), directions (N, 3) and ifov (N,) or None of a point's rays, as given.
+def measure_session_point(
+    point: SessionPoint,
+    *,
+    crs: str | None,
+    vertical: str | None = None,
+    geoid: str | Path | None = None,
+    source_crs: str = "EPSG:4978",
+    sigma_px: float = 1.0,
+    exclude: Sequence[int] = (),
+) -> Measurement:
+    """gsgeo.measure.measure_point of a session point (its typed rays and these settings)."""
+    return measure_rays(point.to_rays(),
+                        SolveSettings(crs=crs, vertical=vertical, geoid=geoid,
+                                      source_crs=source_crs or "EPSG:4978", sigma_px=sigma_px),
+                        point_id=point.id, code=point.code, description=point.description,
+                        exclude=exclude)
 
-    The angular model needs ifov on every ray; a point with ifov on some rays only is an error
-    rather than a silent fall-back to the unweighted model.
-    """
-    origins = np.array([r.origin for r in point.rays], dtype=np.float64).reshape(-1, 3)
-    directions = np.array([r.direction for r in point.rays], dtype=np.float64).reshape(-1, 3)
-    have = [r.ifov is not None for r in point.rays]
-    if any(have) and not all(have):
-        missing = [i for i, h in enumerate(have) if not h]
-        raise InputError(
-            f"no ifov on ray(s) {', '.join(map(str, missing))} (0-based) while the others have "
-            "one; give ifov on every ray (angular model) or on none (unweighted model)",
-            field=f"rays[{missing[0]}].ifov")
-    ifov = np.array([r.ifov for r in point.rays], dtype=np.float64) if all(have) and have else None
-    return origins, directions, ifov
+
+def measure_session(
+    session: Session,
+    *,
+    crs: str | None = None,
+    vertical: str | None = None,
+    geoid: str | Path | None = None,
+    source_crs: str | None = None,
+    sigma_px: float | None = None,
+) -> list[Measurement | MeasurementFailure]:
+    """Measure every point of a session (gsgeo.measure.measure_points); overrides fall back to
+    the session's values."""
+    settings = SolveSettings.parse(
+        crs=crs if crs is not None else session.crs,
+        vertical=vertical if vertical is not None else session.vertical, geoid=geoid,
+        source_crs=source_crs or session.source_crs,
+        sigma_px=sigma_px if sigma_px is not None else session.sigma_px)
+    return measure_points([(p.id, p.code, p.description, p.to_rays()) for p in session.points],
+                          settings)

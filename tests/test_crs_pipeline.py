@@ -17,8 +17,9 @@ from gsgeo.crs.frames import EnuFrame
 from gsgeo.crs.grid import to_grid_many
 from gsgeo.crs.modelmatrix import column_major, rendered_to_georeferenced
 from gsgeo.errors import CRSError, InputError
-from gsgeo.measure import RECORD_KEYS, Measurement, MeasurementFailure, measure_point, measure_session
-from gsgeo.session import Ray, Session, SessionPoint
+from gsgeo.measure import RECORD_KEYS, Measurement, MeasurementFailure
+from gsgeo.session import Ray, Session, SessionPoint, measure_session
+from gsgeo.session import measure_session_point as measure_point
 from gsgeo.solve import intersect_batch
 
 CHI2_3_95 = 7.814727903251178

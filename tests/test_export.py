@@ -34,7 +34,8 @@ from gsgeo.errors import CRSError, GeometryError, InputError
 from gsgeo.export import write_measurements
 from gsgeo.export.csvfile import CSV_COLUMNS
 from gsgeo.export.tables import ELLIPSE_VERTICES, POINT_TYPES
-from gsgeo.measure import RECORD_KEYS, Measurement, measure_session
+from gsgeo.measure import RECORD_KEYS, Measurement
+from gsgeo.session import measure_session
 
 EGM96 = Path("/usr/share/proj/egm96_15.gtx")
 ALL_LAYERS = {"points", "rays", "lines", "polygons", "error_ellipses"}

@@ -18,9 +18,9 @@ with warnings.catch_warnings():
 
 import gsgeo.server.api as api
 from gsgeo.errors import InputError
-from gsgeo.measure import measure_point
 from gsgeo.server.app import ServerConfig, create_app
 from gsgeo.server.intersect_pool import IntersectPool
+from gsgeo.session import measure_session_point as measure_point
 from gsgeo.session import parse_point
 
 

@@ -1,8 +1,9 @@
 """`gsgeo solve SESSION.json`: intersect the rays of every point in a session.
 
 With a grid CRS (``--crs`` or the session's ``crs``) every point goes through
-gsgeo.measure.point.measure_session and is printed as easting, northing, height with sigmas and
-the PROJ operation used; without one the points are printed in the rays' own frame.
+gsgeo.session.measure_session (gsgeo.measure.measure_points) and is printed as
+easting, northing, height with sigmas and the PROJ operation used; without one the points
+are printed in the rays' own frame.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ from gsgeo.errors import GsgeoError, InputError
 from gsgeo.export.atomic import check_target
 from gsgeo.export.writer import FORMATS as EXPORT_FORMATS
 from gsgeo.export.writer import format_for, write_session_results
-from gsgeo.measure import MeasurementFailure, measure_session
-from gsgeo.session import Session, load_session, ray_arrays
+from gsgeo.measure import MeasurementFailure
+from gsgeo.session import Session, load_session, measure_session
 from gsgeo.solve import SCALE_95_1D, intersect
 
 
@@ -62,8 +63,9 @@ def solve_session(session: Session) -> list[dict]:
         entry: dict = {"id": pt.id, "code": pt.code, "description": pt.description,
                        "n_rays": len(pt.rays)}
         try:
-            o, d, ifov = ray_arrays(pt)
-            res = intersect(o, d, ifov=ifov, sigma_px=session.sigma_px)
+            rays = pt.to_rays()
+            res = intersect(rays.origins, rays.directions, ifov=rays.angular_ifov(),
+                            sigma_px=session.sigma_px)
         except GsgeoError as exc:
             entry["error"] = str(exc)
         else:

@@ -1,6 +1,8 @@
 """gsgeo.measure: the measurement core between the geodesy (gsgeo.crs, gsgeo.solve) and
 everything that keeps or shows results (gsgeo.export, gsgeo.store, gsgeo.server).
 
+- ``rays``: the typed input, Rays (a point's aims, rendered ECEF, validated once) and
+  SolveSettings;
 - ``point``: a point's rays (rendered ECEF) -> Measurement in ECEF and the grid CRS;
 - ``schema``: Measurement, its point-schema record (RECORD_KEYS), MeasurementFailure;
 - ``features``: lengths, areas and perimeters of lines and polygons with propagated sigmas
@@ -8,7 +10,8 @@ everything that keeps or shows results (gsgeo.export, gsgeo.store, gsgeo.server)
 """
 
 from gsgeo.measure.features import LineMeasures, PolygonMeasures, line_measures, polygon_measures
-from gsgeo.measure.point import measure_point, measure_session
+from gsgeo.measure.point import measure_point, measure_points
+from gsgeo.measure.rays import Rays, SolveSettings
 from gsgeo.measure.schema import RECORD_KEYS, Measurement, MeasurementFailure
 
 __all__ = [
@@ -18,7 +21,9 @@ __all__ = [
     "MeasurementFailure",
     "PolygonMeasures",
     "line_measures",
+    "Rays",
+    "SolveSettings",
     "measure_point",
-    "measure_session",
+    "measure_points",
     "polygon_measures",
 ]

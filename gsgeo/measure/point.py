@@ -11,7 +11,6 @@ millimetres of the origin and the ENU solution is well conditioned.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
@@ -23,8 +22,8 @@ from gsgeo.crs.resolve import grid_crs
 from gsgeo.crs.resolve import source_crs as resolve_source
 from gsgeo.crs.transformers import transformer
 from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.measure.rays import Rays, SolveSettings
 from gsgeo.measure.schema import Measurement, MeasurementFailure, now_utc
-from gsgeo.session import Session, SessionPoint, ray_arrays
 from gsgeo.solve import intersect
 
 
@@ -62,30 +61,31 @@ def _exclusion_mask(exclude: Sequence[int], n: int, pid: str) -> np.ndarray:
 
 
 def measure_point(
-    point: SessionPoint,
+    rays: Rays,
+    settings: SolveSettings,
     *,
-    crs: str | None,
-    vertical: str | None = None,
-    geoid: str | Path | None = None,
-    source_crs: str = "EPSG:4978",
-    sigma_px: float = 1.0,
+    point_id: str = "P",
+    code: str = "",
+    description: str = "",
     exclude: Sequence[int] = (),
 ) -> Measurement:
-    """Measure one session point: rays in rendered ECEF -> point in ECEF and the grid.
+    """Measure one point: its rays in rendered ECEF -> point in ECEF and the grid.
 
-    crs None gives no grid output (record() grid fields None, WGS 84 lon/lat/h still set).
-    `exclude` lists 0-based ray indices left out of the solution (reported as excluded).
-    Raises InputError / GeometryError (the rays) or CRSError / DatumError (the CRS).
+    ``settings.crs`` None gives no grid output (record() grid fields None, WGS 84 lon/lat/h
+    still set). ``exclude`` lists 0-based ray indices left out of the solution (reported as
+    excluded). Raises InputError / GeometryError (the rays) or CRSError / DatumError (the CRS).
     """
-    src_text = source_crs or "EPSG:4978"
-    src = resolve_source(src_text)
-    o_r, d_r, ifov = ray_arrays(point)
+    crs, vertical, geoid = settings.crs, settings.vertical, settings.geoid
+    sigma_px = settings.sigma_px
+    src = resolve_source(settings.source_crs or "EPSG:4978")
+    o_r, d_r = rays.origins, rays.directions
     n = o_r.shape[0]
     if n < 2:
-        raise InputError(f"point '{point.id}' needs at least 2 rays, has {n}", field="rays")
-    mask = _exclusion_mask(exclude, n, point.id)
+        raise InputError(f"point '{point_id}' needs at least 2 rays, has {n}", field="rays")
+    ifov = rays.angular_ifov()
+    mask = _exclusion_mask(exclude, n, point_id)
     keep = ~mask
-    o, d, similar = rendered_to_georeferenced(o_r, d_r, [r.model_matrix for r in point.rays])
+    o, d, similar = rendered_to_georeferenced(o_r, d_r, [rays.model_matrix(i) for i in range(n)])
     for i in range(n):  # a model_matrix can move a sane ray out of range
         problem = limits.origin_problem(o[i]) if np.all(np.isfinite(o[i])) else "not finite"
         if problem:
@@ -139,9 +139,9 @@ def measure_point(
         lon, lat, h84 = (float(v) for v in t84.transform(*point_ecef, errcheck=False))
 
     return Measurement(
-        point_id=point.id,
-        code=point.code,
-        description=point.description,
+        point_id=point_id,
+        code=code,
+        description=description,
         solution=sol,
         enu_origin_ecef=frame.origin_ecef,
         point_ecef=point_ecef,
@@ -164,44 +164,34 @@ def measure_point(
     )
 
 
-def measure_session(
-    session: Session,
-    *,
-    crs: str | None = None,
-    vertical: str | None = None,
-    geoid: str | Path | None = None,
-    source_crs: str | None = None,
-    sigma_px: float | None = None,
+def measure_points(
+    points: Sequence[tuple[str, str, str, Rays]],
+    settings: SolveSettings,
 ) -> list[Measurement | MeasurementFailure]:
-    """Measure every point of a session; overrides fall back to the session's values.
+    """Measure every (id, code, description, rays) point with the same settings.
 
     A point that cannot be measured (its rays, or e.g. outside the geoid grid) becomes a
-    MeasurementFailure; a CRS problem of the whole session (unknown CRS, a missing geoid grid
+    MeasurementFailure; a CRS problem of the whole set (unknown CRS, a missing geoid grid
     that fails every point alike) raises CRSError once.
     """
-    crs = crs if crs is not None else session.crs
-    vertical = vertical if vertical is not None else session.vertical
-    src = source_crs or session.source_crs or "EPSG:4978"
-    s_px = sigma_px if sigma_px is not None else session.sigma_px
-    s_px = limits.sigma_px(s_px)
-    resolve_source(src)
-    if crs:
-        grid_crs(crs, vertical)
-    elif vertical or geoid:
+    resolve_source(settings.source_crs)
+    if settings.crs:
+        grid_crs(settings.crs, settings.vertical)
+    elif settings.vertical or settings.geoid:
         raise InputError("a vertical datum (--vertical / --geoid) needs a grid CRS (--crs)")
     out: list[Measurement | MeasurementFailure] = []
     crs_errors: list[CRSError] = []
-    for pt in session.points:
+    for pid, code, description, rays in points:
         try:
-            out.append(measure_point(pt, crs=crs, vertical=vertical, geoid=geoid,
-                                     source_crs=src, sigma_px=s_px))
+            out.append(measure_point(rays, settings, point_id=pid, code=code,
+                                     description=description))
         except CRSError as exc:
-            # e.g. a point outside the geoid grid; the whole session failing alike (a missing
+            # e.g. a point outside the geoid grid; the whole set failing alike (a missing
             # grid) is raised once below instead
             crs_errors.append(exc)
-            out.append(MeasurementFailure(pt.id, str(exc)))
+            out.append(MeasurementFailure(pid, str(exc)))
         except GsgeoError as exc:
-            out.append(MeasurementFailure(pt.id, str(exc)))
+            out.append(MeasurementFailure(pid, str(exc)))
     if crs_errors and len(crs_errors) == len(out) and len({str(e) for e in crs_errors}) == 1:
         raise crs_errors[0]
     return out

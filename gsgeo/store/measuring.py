@@ -66,12 +66,13 @@ def find_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
 def measure(point: SessionPoint, settings: dict[str, Any], excluded: list[int],
             data_dir: Path | None = None):
     """The gsgeo.measure.point Measurement of ``point`` with a project's ``settings``."""
-    from gsgeo.measure import measure_point
+    from gsgeo.session import measure_session_point
 
-    return measure_point(point, crs=settings.get("crs"), vertical=settings.get("vertical"),
-                         geoid=find_geoid(settings.get("geoid"), data_dir),
-                         source_crs=settings.get("source_crs") or "EPSG:4978",
-                         sigma_px=float(settings.get("sigma_px") or 1.0), exclude=excluded)
+    return measure_session_point(point, crs=settings.get("crs"), vertical=settings.get("vertical"),
+                                 geoid=find_geoid(settings.get("geoid"), data_dir),
+                                 source_crs=settings.get("source_crs") or "EPSG:4978",
+                                 sigma_px=float(settings.get("sigma_px") or 1.0),
+                                 exclude=excluded)
 
 
 def measured_fields(m) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -16,7 +16,9 @@ from typing import Any
 import numpy as np
 
 from gsgeo.errors import CRSError, GsgeoError, InputError
-from gsgeo.store.accuracy import accuracy_report
+from gsgeo.measure.accuracy import accuracy_report
+from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
+from gsgeo.measure.rays import SolveSettings
 from gsgeo.store.base import Store, Transaction
 from gsgeo.store.checkpoints import CheckPointRow
 from gsgeo.store.measuring import (
@@ -563,56 +565,15 @@ class Projects:
 def check_points_in_grid(cps: list[CheckPointRecord], project: Project,
                          crs: str | None = None, data_dir: Path | None = None,
                          height_hint: np.ndarray | None = None) -> np.ndarray:
-    """(M, 3) easting, northing, height of check points in the project's grid (or ``crs``).
-
-    Check points in a geographic or geocentric CRS go to ECEF and then through
-    gsgeo.crs.to_grid_many, the very path the measured points take (same datum operation,
-    same vertical datum or geoid), so a difference is never a difference of paths. Points in a
-    projected (or compound) CRS: easting/northing through PROJ when the CRS differs, heights
-    as given. A missing height stays NaN; ``height_hint`` (M,) ellipsoidal heights (e.g. of the
-    matched measured points) stand in for it in 3-D datum steps, where the height moves E, N
-    by about 1 mm per 50 m.
-    """
-    from gsgeo.crs.grid import to_grid_many
-    from gsgeo.crs.resolve import parse_crs, projected_crs
-    from gsgeo.crs.transformers import transformer
-
-    grid = crs or project.crs
-    same_grid = grid == project.crs
-    vertical = project.vertical if same_grid else None
-    geoid = find_geoid(project.geoid, data_dir) if same_grid else None
-    out = np.full((len(cps), 3), np.nan)
-    target = projected_crs(grid)
-    for src in sorted({c.crs for c in cps}):
-        idx = [i for i, c in enumerate(cps) if c.crs == src]
-        xyz = np.array([[cps[i].x, cps[i].y, np.nan if cps[i].z is None else cps[i].z]
-                        for i in idx], dtype=float)
-        s = parse_crs(src)
-        if s.is_geocentric or s.is_geographic:
-            has_h = np.isfinite(xyz[:, 2])
-            src3 = s if s.is_geocentric or len(s.axis_info) == 3 else s.to_3d()
-            t = transformer(src3.to_wkt(), parse_crs(project.source_crs).to_wkt())
-            hint = np.zeros(len(idx)) if height_hint is None else \
-                np.nan_to_num(np.asarray(height_hint, dtype=float)[idx])
-            ecef = np.column_stack(t.transform(xyz[:, 0], xyz[:, 1],
-                                               np.where(has_h, xyz[:, 2], hint)))
-            if not np.all(np.isfinite(ecef)):
-                raise CRSError(f"check points in {src}: some cannot be transformed to "
-                               f"{project.source_crs}")
-            g = to_grid_many(ecef, None, grid, vertical=vertical, geoid=geoid,
-                             source_crs=project.source_crs)
-            e, n, h = g.easting, g.northing, np.where(has_h, g.height, np.nan)
-        else:
-            horiz = s.sub_crs_list[0] if s.is_compound else s
-            if horiz.equals(target):
-                e, n = xyz[:, 0], xyz[:, 1]
-            else:
-                e, n = transformer(horiz.to_wkt(), target.to_wkt()).transform(xyz[:, 0], xyz[:, 1])
-            h = xyz[:, 2]
-        out[idx, 0], out[idx, 1], out[idx, 2] = e, n, h
-    if not np.all(np.isfinite(out[:, :2])):
-        raise CRSError("check points: some cannot be transformed into the project's grid CRS")
-    return out
+    """(M, 3) easting, northing, height of check points in the project's grid (or ``crs``):
+    gsgeo.measure.checkpoints.check_points_in_grid with the project's settings."""
+    xyz = np.array([[c.x, c.y, np.nan if c.z is None else c.z] for c in cps],
+                   dtype=float).reshape(-1, 3)
+    same_grid = (crs or project.crs) == project.crs  # only then is the geoid used
+    settings = SolveSettings(crs=project.crs, vertical=project.vertical,
+                             geoid=find_geoid(project.geoid, data_dir) if same_grid else None,
+                             source_crs=project.source_crs, sigma_px=project.sigma_px)
+    return points_in_grid(xyz, [c.crs for c in cps], settings, crs=crs, height_hint=height_hint)
 
 
 def feature_measures(f: FeatureRecord, points: dict[str, PointRecord],

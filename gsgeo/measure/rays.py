@@ -1,0 +1,194 @@
+"""The typed core of a measurement's input: a point's rays and the settings it is measured with.
+
+:class:`Rays` holds the aims of one point as arrays, in rendered ECEF (metres): the frame the
+viewer draws in, the tileset's modelMatrix applied. Its constructor is the one place the
+ranges of :mod:`gsgeo.limits` are checked (origin, direction, ifov, affine model matrix);
+the session-JSON reader and the HTTP models only check the JSON shape and build it.
+Errors name ``rays[i].<member>``; callers locate them further with ``exc.within(...)``.
+
+:class:`SolveSettings` are the measuring settings of a session or project: output grid CRS,
+vertical CRS or geoid grid, the scene's geocentric CRS and the a-priori aiming precision.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gsgeo import limits
+from gsgeo.errors import InputError
+
+#: The session-JSON members of a ray, in the order they are written.
+RAY_KEYS = ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")
+
+
+def _optional_rows(values: Sequence[Sequence[float] | None] | np.ndarray | None, n: int,
+                   width: int) -> np.ndarray | None:
+    """(n, width) float array, NaN rows where a value is absent; None when none is given."""
+    if values is None:
+        return None
+    if isinstance(values, np.ndarray):
+        return np.asarray(values, dtype=np.float64).reshape(n, width)
+    if all(v is None for v in values):
+        return None
+    out = np.full((n, width), np.nan)
+    for i, v in enumerate(values):
+        if v is not None:
+            out[i] = np.asarray(v, dtype=np.float64).reshape(width)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Rays:
+    """N aims at one point, rendered ECEF (metres).
+
+    origins : (N, 3) camera centres. directions : (N, 3), any length within limits.
+    ifov : (N,) angular size of a pixel (radians), NaN on a ray without one; None when no
+        ray has one. pixels, viewports : (N, 2) CSS pixels, NaN rows where absent, or None.
+    model_matrices : (N, 4, 4) the tileset's modelMatrix at each click (NaN where the ray
+        has none: identity), or None.
+
+    Validated on construction; InputError names ``rays[i].<member>``.
+    """
+
+    origins: np.ndarray
+    directions: np.ndarray
+    ifov: np.ndarray | None = None
+    pixels: np.ndarray | None = None
+    viewports: np.ndarray | None = None
+    model_matrices: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        o = np.asarray(self.origins, dtype=np.float64).reshape(-1, 3)
+        d = np.asarray(self.directions, dtype=np.float64).reshape(-1, 3)
+        n = o.shape[0]
+        if d.shape[0] != n:
+            raise InputError(f"{n} origins but {d.shape[0]} directions", field="rays")
+        f = None if self.ifov is None else np.asarray(self.ifov, dtype=np.float64).reshape(n)
+        if f is not None and np.all(np.isnan(f)):
+            f = None
+        px = _optional_rows(self.pixels, n, 2)
+        vp = _optional_rows(self.viewports, n, 2)
+        mm = None if self.model_matrices is None else \
+            np.asarray(self.model_matrices, dtype=np.float64).reshape(n, 4, 4)
+        for i in range(n):
+            at = f"rays[{i}]"
+            problem = limits.origin_problem(o[i]) if np.all(np.isfinite(o[i])) else \
+                "expected a finite number"
+            if problem:
+                raise InputError(problem, field=f"{at}.origin")
+            problem = limits.direction_problem(d[i]) if np.all(np.isfinite(d[i])) else \
+                "expected a finite number"
+            if problem:
+                raise InputError(problem, field=f"{at}.direction")
+            if f is not None and not np.isnan(f[i]):
+                limits.ifov(float(f[i]), f"{at}.ifov")
+            for name, arr in (("pixel", px), ("viewport", vp)):
+                if arr is not None and np.any(np.isinf(arr[i])):
+                    raise InputError("expected a finite number", field=f"{at}.{name}")
+            if mm is not None and not np.all(np.isnan(mm[i])):
+                m = mm[i]
+                if not np.all(np.isfinite(m)):
+                    raise InputError("expected a finite number", field=f"{at}.model_matrix")
+                if m[3, 0] != 0 or m[3, 1] != 0 or m[3, 2] != 0 or m[3, 3] == 0:
+                    raise InputError("not an affine 4x4 matrix in column-major order (elements "
+                                     "3, 7, 11 must be 0 and element 15 non-zero)",
+                                     field=f"{at}.model_matrix")
+        if mm is not None and np.all(np.isnan(mm)):
+            mm = None
+        for name, value in (("origins", o), ("directions", d), ("ifov", f), ("pixels", px),
+                            ("viewports", vp), ("model_matrices", mm)):
+            if value is not None:
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_columns(cls, origins: Sequence[Sequence[float]], directions: Sequence[Sequence[float]],
+                     ifov: Sequence[float | None] | None = None,
+                     pixels: Sequence[Sequence[float] | None] | None = None,
+                     viewports: Sequence[Sequence[float] | None] | None = None,
+                     model_matrices: Sequence[Sequence[float] | None] | None = None) -> Rays:
+        """Rays from per-ray values as JSON gives them (None where a ray has no such member);
+        model matrices as 16 numbers in column-major order (3D Tiles, CesiumJS)."""
+        n = len(origins)
+        f = None
+        if ifov is not None and any(v is not None for v in ifov):
+            f = np.array([np.nan if v is None else float(v) for v in ifov])
+        mm = None
+        if model_matrices is not None and any(m is not None for m in model_matrices):
+            mm = np.full((n, 4, 4), np.nan)
+            for i, m16 in enumerate(model_matrices):
+                if m16 is not None:
+                    mm[i] = np.asarray(m16, dtype=np.float64).reshape(4, 4).T
+        return cls(np.asarray(origins, dtype=np.float64).reshape(n, 3),
+                   np.asarray(directions, dtype=np.float64).reshape(n, 3), f,
+                   _optional_rows(pixels, n, 2), _optional_rows(viewports, n, 2), mm)
+
+    def __len__(self) -> int:
+        return int(self.origins.shape[0])
+
+    def model_matrix(self, i: int) -> np.ndarray | None:
+        """The (4, 4) modelMatrix of ray ``i``, None for identity (none given)."""
+        if self.model_matrices is None or np.all(np.isnan(self.model_matrices[i])):
+            return None
+        return self.model_matrices[i]
+
+    def angular_ifov(self) -> np.ndarray | None:
+        """ifov (N,) of every ray for the angular model, None for the unweighted model.
+
+        The angular model needs ifov on every ray; ifov on some rays only is an InputError
+        about the first ray without one rather than a silent fall-back.
+        """
+        if self.ifov is None:
+            return None
+        missing = np.flatnonzero(np.isnan(self.ifov))
+        if missing.size:
+            raise InputError(
+                f"no ifov on ray(s) {', '.join(map(str, missing.tolist()))} (0-based) while the "
+                "others have one; give ifov on every ray (angular model) or on none (unweighted "
+                "model)", field=f"rays[{int(missing[0])}].ifov")
+        return self.ifov
+
+    def to_json(self) -> list[dict[str, Any]]:
+        """The session-JSON ray objects (README, "Session JSON"), members only where given."""
+        out: list[dict[str, Any]] = []
+        for i in range(len(self)):
+            ray: dict[str, Any] = {"origin": self.origins[i].tolist(),
+                                   "direction": self.directions[i].tolist()}
+            if self.ifov is not None and not np.isnan(self.ifov[i]):
+                ray["ifov"] = float(self.ifov[i])
+            for key, arr in (("pixel", self.pixels), ("viewport", self.viewports)):
+                if arr is not None and not np.all(np.isnan(arr[i])):
+                    ray[key] = arr[i].tolist()
+            m = self.model_matrix(i)
+            if m is not None:
+                ray["model_matrix"] = m.T.reshape(-1).tolist()
+            out.append(ray)
+        return out
+
+
+@dataclass(frozen=True)
+class SolveSettings:
+    """How a point is measured: grid ``crs`` (None: ECEF and WGS 84 only), ``vertical`` CRS
+    or ``geoid`` grid file (not both), ``source_crs`` (the scene's geocentric CRS) and
+    ``sigma_px`` (a-priori aiming precision, pixels). Build with :meth:`parse` to check it."""
+
+    crs: str | None = None
+    vertical: str | None = None
+    geoid: str | Path | None = None
+    source_crs: str = "EPSG:4978"
+    sigma_px: float = 1.0
+
+    @classmethod
+    def parse(cls, *, crs: str | None = None, vertical: str | None = None,
+              geoid: str | Path | None = None, source_crs: str | None = None,
+              sigma_px: Any = 1.0) -> SolveSettings:
+        """Settings with sigma_px within gsgeo.limits and an empty source_crs meaning
+        EPSG:4978; InputError names the field. The CRSs are parsed where they are used."""
+        return cls(crs=crs or None, vertical=vertical or None, geoid=geoid or None,
+                   source_crs=source_crs or "EPSG:4978",
+                   sigma_px=limits.sigma_px(sigma_px, "sigma_px"))
