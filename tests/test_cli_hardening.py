@@ -24,11 +24,11 @@ from gsgeo import cli
 from gsgeo.cli import main
 from gsgeo.errors import InputError
 from gsgeo.measure.features import polygon_measures
+from gsgeo.service import Projects, open_store
+from gsgeo.service.checkpoints import read_check_points
+from gsgeo.service.validate import item_id
 from gsgeo.session import parse_session
 from gsgeo.solve import intersect, intersect_batch
-from gsgeo.store import Projects, open_store
-from gsgeo.store.checkpoints import read_check_points
-from gsgeo.store.validate import item_id
 
 EXAMPLE = REPO / "examples" / "session.json"
 

@@ -16,7 +16,7 @@ import pytest
 from servertools import rays_at
 
 from gsgeo.demo import place, scene
-from gsgeo.store import Projects, open_store
+from gsgeo.service import Projects, open_store
 from tests.conftest import REPO
 
 

@@ -31,7 +31,7 @@ SCRIPT = textwrap.dedent("""
     from gsgeo.cli import main
     out = Path(tempfile.mkdtemp()) / "out.gpkg"
     assert main(["solve", {session!r}, "--crs", "EPSG:27700", "-o", str(out)]) == 0
-    from gsgeo.store.checkpoints import read_check_points
+    from gsgeo.service.checkpoints import read_check_points
     rows = read_check_points(out.read_bytes(), "gpkg")
     print(len(rows), "check points read back")
 """)

@@ -16,6 +16,7 @@ import pytest
 from servertools import LONDON, REPO, ecef_of, london_rays, rays_at
 
 from gsgeo.errors import CRSError, GeometryError, InputError
+from gsgeo.service import Projects
 from gsgeo.store import (
     DB_NAME,
     CheckPointRecord,
@@ -24,7 +25,6 @@ from gsgeo.store import (
     NotFoundError,
     PointRecord,
     Project,
-    Projects,
     StoreError,
     open_store,
 )
@@ -243,7 +243,7 @@ WRITER = textwrap.dedent("""
     import sys
     sys.path.insert(0, {tests!r})
     from servertools import ecef_of, rays_at, LONDON
-    from gsgeo.store import Projects, open_store
+    from gsgeo.service import Projects, open_store
     svc = Projects(open_store({data!r}))
     pid = svc.create_project(name="crash", id="crash", crs="EPSG:32630").id
     crs = ["EPSG:32630", "EPSG:32631"]

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from gsgeo.demo import place
 from gsgeo.demo.build import SCENE_NAME, DemoBuild
-from gsgeo.store import NotFoundError, Project, Projects, open_store
-from gsgeo.store.checkpoints import CheckPointRow
+from gsgeo.service import NotFoundError, Project, Projects, open_store
+from gsgeo.service.checkpoints import CheckPointRow
 
 PROJECT_ID = "demo"
 PROJECT_NAME = "Demo: Parker's Piece (synthetic scene with ground truth)"

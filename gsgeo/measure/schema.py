@@ -10,21 +10,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
 from gsgeo.crs.grid import GridPoint
+from gsgeo.pointschema import RECORD_KEYS, record_of
 from gsgeo.solve import IntersectionResult
 
-#: Keys of the point schema (the README's CSV columns), in order.
-RECORD_KEYS = (
-    "point_id", "code", "description", "easting", "northing", "height", "height_type",
-    "vertical_datum", "crs", "sigma_e", "sigma_n", "sigma_h", "cov_ee", "cov_en", "cov_eh",
-    "cov_nn", "cov_nh", "cov_hh", "ellipse_major_95", "ellipse_minor_95",
-    "ellipse_bearing_deg", "sigma0", "n_rays", "max_angle_deg", "rms_m", "max_residual_px",
-    "lon", "lat", "h_wgs84", "operation", "operation_accuracy_m", "measured_at",
-)
-
+__all__ = ["RECORD_KEYS", "Measurement", "MeasurementFailure", "now_utc", "record_of"]
 
 def now_utc() -> str:
     """The current time, ISO 8601 UTC to the second ('2026-11-24T15:00:00Z')."""
@@ -63,7 +57,7 @@ class Measurement:
         """Rays used in the solution (excluded ones not counted)."""
         return int((~self.excluded).sum())
 
-    def record(self) -> dict:
+    def record(self) -> dict[str, Any]:
         """The point-schema row, keys in order; grid fields None without a grid."""
         g = self.grid
         s = self.solution
@@ -89,7 +83,7 @@ class Measurement:
             )
         return rec
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """record() plus rays, warnings, 95 % ellipsoid axes and the ENU solution (JSON-ready)."""
         out = self.record()
         rays = []
@@ -131,5 +125,6 @@ class MeasurementFailure:
     point_id: str
     error: str
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, str]:
+        """The failure as JSON: point_id and error."""
         return {"point_id": self.point_id, "error": self.error}

@@ -24,10 +24,11 @@ from gsgeo import __version__
 from gsgeo.errors import InputError
 from gsgeo.server import models as m
 from gsgeo.server.scenes import list_scenes
-from gsgeo.store import FeatureRecord, PointRecord, Project, Projects
-from gsgeo.store.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
-from gsgeo.store.measuring import check_excluded, measure, session_point
-from gsgeo.store.projects import validate_settings
+from gsgeo.service import CheckPointRecord, FeatureRecord, PointRecord, Project, Projects
+from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
+from gsgeo.service.measuring import measure
+from gsgeo.service.projects import intersect_point
+from gsgeo.service.projects import intersect_request as check_intersect
 
 
 class ErrorBody(m.BaseModel):
@@ -112,19 +113,18 @@ def warm_intersect() -> None:
     """A solve of two synthetic rays (no grid CRS): imports the pipeline and builds the PROJ
     objects every request needs on the calling thread."""
     up = [3978000.0, -8700.0, 4968000.0]  # ECEF, metres: near London, ~50 m up
-    rays = [{"origin": [up[0] + 30.0 * k, up[1], up[2] + 40.0], "direction": [-k, 0.0, -1.0]}
-            for k in (1, -1)]
-    measure(session_point("warm-up", rays), {"source_crs": "EPSG:4978"}, [], None).to_dict()
+    body = m.IntersectRequest(id="warm-up", rays=[
+        m.Ray(origin=[up[0] + 30.0 * k, up[1], up[2] + 40.0], direction=[-k, 0.0, -1.0])
+        for k in (1, -1)])
+    intersect_point(body.to_input(), {"source_crs": "EPSG:4978"}, None).to_dict()
 
 
 def intersect_request(body: m.IntersectRequest, data_dir: Path) -> Response:
     """The work of POST /intersect, on a thread of gsgeo.server.intersect_pool."""
-    rays = [r.model_dump(exclude_none=True) for r in body.rays]
-    sp = session_point(body.id, rays, body.code, body.description)
-    excluded = check_excluded(body.exclude, len(rays), "exclude")
-    settings = validate_settings(
-        body.model_dump(include={"crs", "vertical", "geoid", "source_crs", "sigma_px"}), data_dir)
-    return fast_json(measure(sp, settings, excluded, data_dir).to_dict())
+    point = body.to_input()
+    excluded, settings = check_intersect(point, body.settings(), data_dir)
+    return fast_json(measure(point.rays, settings, excluded, data_dir, point_id=body.id,
+                             code=body.code, description=body.description).to_dict())
 
 
 @router.get("/crs", summary="Search coordinate reference systems by name, area or code")
@@ -225,9 +225,7 @@ def list_points(pid: PID, request: Request,
 
 @router.post("/projects/{pid}/points", status_code=201, summary="Solve and store a point")
 def create_point(pid: PID, body: m.PointCreate, request: Request) -> dict[str, Any]:
-    doc = body.model_dump()
-    doc["rays"] = [r.model_dump(exclude_none=True) for r in body.rays]
-    return fast_json(point_json(svc(request).add_point(pid, doc)), 201)
+    return fast_json(point_json(svc(request).add_point(pid, body.to_input())), 201)
 
 
 @router.get("/projects/{pid}/points/{point_id}", summary="One point")
@@ -240,7 +238,7 @@ def get_point(pid: PID, point_id: ITEM, request: Request) -> dict[str, Any]:
 def patch_point(pid: PID, point_id: ITEM, body: m.PointPatch, request: Request) -> dict[str, Any]:
     changes = {k: v for k, v in body.model_dump(exclude_unset=True).items() if v is not None}
     if body.rays is not None:
-        changes["rays"] = [r.model_dump(exclude_none=True) for r in body.rays]
+        changes["rays"] = m.rays_of(body.rays)
     return fast_json(point_json(svc(request).update_point(pid, point_id, changes)))
 
 
@@ -292,7 +290,7 @@ _feature_routes("polygon", "polygons")
 
 
 # check points ------------------------------------------------------------------------------
-def check_point_json(c) -> dict[str, Any]:
+def check_point_json(c: CheckPointRecord) -> dict[str, Any]:
     return {"id": c.id, "x": c.x, "y": c.y, "z": c.z, "crs": c.crs, "role": c.role,
             "source": c.source, "created_at": c.created_at}
 
@@ -378,7 +376,7 @@ def export(pid: PID, request: Request,
                "grid CRS; the project's when absent (another CRS re-measures from the rays)"))]
            = None,
            ) -> FileResponse:
-    from gsgeo.server.exporting import export_project
+    from gsgeo.service.exporting import export_project  # the writers load on first export
 
     tmpdir = Path(tempfile.mkdtemp(prefix="gsgeo-export-"))
     try:

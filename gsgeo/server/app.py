@@ -31,7 +31,7 @@ from gsgeo.server.hosts import is_loopback
 from gsgeo.server.intersect_pool import IntersectPool
 from gsgeo.server.routing import allowed_methods, body_limiter
 from gsgeo.server.scenes import SceneFolders
-from gsgeo.store import ConflictError, NotFoundError, Projects, StoreError, open_store
+from gsgeo.service import ConflictError, NotFoundError, Store, StoreError, open_projects
 
 log = logging.getLogger("gsgeo.server")
 
@@ -159,9 +159,10 @@ The API is at <a href="/docs">/docs</a>; scenes are listed at
 <a href="/api/scenes">/api/scenes</a>.</p></body></html>"""
 
 
-def create_app(config: ServerConfig, store=None) -> FastAPI:
+def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     """The application; ``store`` defaults to the SQLite store of ``config.data_dir``."""
-    store = store or open_store(config.data_dir)
+    projects = open_projects(config.data_dir, store)
+    store = projects.store
     intersect_pool = IntersectPool(config.solver_threads)
 
     @asynccontextmanager
@@ -179,7 +180,7 @@ def create_app(config: ServerConfig, store=None) -> FastAPI:
     app.state.config = config
     app.state.store = store
     app.state.intersect_pool = intersect_pool
-    app.state.projects = Projects(store, config.data_dir)
+    app.state.projects = projects
     _install_error_handlers(app)
 
     from gsgeo.server.api import router

@@ -1,8 +1,10 @@
 """Request bodies of the JSON API (pydantic), in the session-JSON shapes (README, "Session JSON").
 
-They check types and sizes so a malformed request gets 422 naming the field; the deeper
-checks (zero direction, affine model matrix, enough rays, CRS) happen in gsgeo.session,
-gsgeo.store and gsgeo.crs and name the field as well.
+They check the JSON shape (types, lengths, sizes) so a malformed request gets 422 naming
+the field; the rays then go straight into the typed core (:func:`rays_of` ->
+gsgeo.measure.Rays), whose constructor is the one check of their ranges (zero direction,
+origin, ifov, affine model matrix); CRS checks happen in gsgeo.service and gsgeo.crs. Each
+names the field as well.
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from gsgeo.limits import IFOV_MAX, IFOV_MIN, SIGMA_PX_MAX, SIGMA_PX_MIN
+from gsgeo.measure import Rays as RayArrays
+from gsgeo.service import PointInput
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
@@ -43,6 +47,14 @@ class Ray(BaseModel):
 Rays = Annotated[list[Ray], Field(min_length=2, max_length=1000)]
 
 
+def rays_of(rays: list[Ray]) -> RayArrays:
+    """The typed rays (gsgeo.measure.Rays) of validated request rays; InputError names
+    ``rays[i].<member>`` for a value out of range."""
+    return RayArrays.from_columns([r.origin for r in rays], [r.direction for r in rays],
+                                  [r.ifov for r in rays], [r.pixel for r in rays],
+                                  [r.viewport for r in rays], [r.model_matrix for r in rays])
+
+
 class SolveSettings(BaseModel):
     crs: CrsText | None = Field(None, description="output grid CRS, e.g. EPSG:27700")
     vertical: CrsText | None = Field(None, description="vertical CRS, e.g. EPSG:5701")
@@ -60,6 +72,15 @@ class IntersectRequest(SolveSettings):
     id: ItemId = "P"
     code: Code = ""
     description: Text = ""
+
+    def to_input(self) -> PointInput:
+        """The point to measure (typed rays; ``exclude`` as its excluded rays)."""
+        return PointInput(rays=rays_of(self.rays), id=self.id, code=self.code,
+                          description=self.description, excluded=list(self.exclude))
+
+    def settings(self) -> dict[str, str | float | None]:
+        """crs, vertical, geoid, source_crs, sigma_px as a project's settings."""
+        return self.model_dump(include={"crs", "vertical", "geoid", "source_crs", "sigma_px"})
 
 
 class ProjectCreate(SolveSettings):
@@ -91,6 +112,11 @@ class PointCreate(BaseModel):
     description: Text = ""
     rays: Rays
     excluded: Annotated[list[RayIndex], Field(max_length=1000)] = Field(default_factory=list)
+
+    def to_input(self) -> PointInput:
+        """The point to store (typed rays)."""
+        return PointInput(rays=rays_of(self.rays), id=self.id, code=self.code,
+                          description=self.description, excluded=list(self.excluded))
 
 
 class PointPatch(BaseModel):

@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from gsgeo.store import DB_NAME
-from gsgeo.store.validate import SLUG
+from gsgeo.service import DB_NAME
+from gsgeo.service.validate import SLUG
 
 #: The store file and the files SQLite keeps beside it.
 STORE_SUFFIXES = ("", "-wal", "-shm", "-journal")

@@ -1,12 +1,11 @@
-"""Projects, points (rays + solved results), lines, polygons and check points.
+"""Persistence of projects, points (rays + measured result), lines, polygons and check points.
 
 The storage backend sits behind :class:`~gsgeo.store.base.Store`; the embedded default is
-one SQLite file in the data directory (:func:`open_store`). :class:`Projects` is the service
-the HTTP API uses: it validates, solves through gsgeo.crs and writes one transaction per call.
+one SQLite file in the data directory (:func:`open_store`). Records only: validation and
+measuring are gsgeo.service's (which imports this package, never the other way round).
 """
 
 from gsgeo.store.base import Store, Transaction
-from gsgeo.store.projects import Projects
 from gsgeo.store.records import (
     CheckPointRecord,
     ConflictError,
@@ -25,7 +24,6 @@ __all__ = [
     "NotFoundError",
     "PointRecord",
     "Project",
-    "Projects",
     "SQLiteStore",
     "Store",
     "StoreError",

@@ -67,6 +67,34 @@ MIGRATIONS: list[str] = [
         PRIMARY KEY (project_id, id)
     );
     """,
+    # 2: one record per point: the point-schema row is derived from `result` when read (it
+    # was a second copy a rename had to keep in step); the table is rebuilt without `record`
+    # because its CHECK constraints name the column
+    """
+    CREATE TABLE points_v2 (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        id TEXT NOT NULL,
+        seq INTEGER NOT NULL,
+        code TEXT NOT NULL DEFAULT '',
+        description TEXT NOT NULL DEFAULT '',
+        rays TEXT NOT NULL CHECK (json_valid(rays) AND json_array_length(rays) >= 2),
+        excluded TEXT NOT NULL DEFAULT '[]' CHECK (json_valid(excluded)),
+        result TEXT CHECK (result IS NULL OR json_valid(result)),
+        error TEXT,
+        solved_rev INTEGER NOT NULL DEFAULT -1,
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        PRIMARY KEY (project_id, id),
+        CHECK (result IS NOT NULL OR error IS NOT NULL)
+    );
+    INSERT INTO points_v2 (project_id, id, seq, code, description, rays, excluded, result,
+                           error, solved_rev, created_at, updated_at)
+        SELECT project_id, id, seq, code, description, rays, excluded, result, error,
+               solved_rev, created_at, updated_at FROM points;
+    DROP TABLE points;
+    ALTER TABLE points_v2 RENAME TO points;
+    CREATE INDEX points_seq ON points(project_id, seq);
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gsgeo.errors import GsgeoError, InputError
+from gsgeo.pointschema import record_of
 
 
 class NotFoundError(GsgeoError, LookupError):
@@ -60,12 +61,18 @@ class PointRecord:
     description: str = ""
     excluded: list[int] = field(default_factory=list)  # 0-based ray indices left out
     result: dict[str, Any] | None = None  # Measurement.to_dict(); None when not solved
-    record: dict[str, Any] | None = None  # point-schema row (Measurement.record())
+    # The point-schema row: a view of ``result`` (gsgeo.pointschema.record_of), derived when
+    # the record is made and not stored, so a rename changes one copy only.
+    record: dict[str, Any] | None = None
     error: str | None = None  # why the point could not be solved with the current settings
     solved_rev: int = -1
     seq: int = 0  # creation order
     created_at: str = ""
     updated_at: str = ""
+
+    def __post_init__(self) -> None:
+        if self.record is None and self.result is not None:
+            self.record = record_of(self.result)
 
 
 @dataclass

@@ -111,7 +111,7 @@ class SQLiteTransaction(Transaction):
         return PointRecord(project_id=row["project_id"], id=row["id"], seq=row["seq"],
                            code=row["code"], description=row["description"],
                            rays=json.loads(row["rays"]), excluded=json.loads(row["excluded"]),
-                           result=_loads(row["result"]), record=_loads(row["record"]),
+                           result=_loads(row["result"]),
                            error=row["error"], solved_rev=row["solved_rev"],
                            created_at=row["created_at"], updated_at=row["updated_at"])
 
@@ -133,11 +133,11 @@ class SQLiteTransaction(Transaction):
                           (p.project_id,))[0]
         self._insert(
             "INSERT INTO points (project_id, id, seq, code, description, rays, excluded, result,"
-            " record, error, solved_rev, created_at, updated_at)"
-            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            " error, solved_rev, created_at, updated_at)"
+            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
             (p.project_id, p.id, p.seq, p.code, p.description, _dumps(p.rays),
              _dumps(p.excluded), None if p.result is None else _dumps(p.result),
-             None if p.record is None else _dumps(p.record), p.error, p.solved_rev,
+             p.error, p.solved_rev,
              p.created_at, p.updated_at),
             f"point '{p.id}'",
         )
@@ -147,10 +147,10 @@ class SQLiteTransaction(Transaction):
         try:
             self.con.execute(
                 "UPDATE points SET id=?, code=?, description=?, rays=?, excluded=?, result=?,"
-                " record=?, error=?, solved_rev=?, updated_at=? WHERE project_id=? AND id=?",
+                " error=?, solved_rev=?, updated_at=? WHERE project_id=? AND id=?",
                 (p.id, p.code, p.description, _dumps(p.rays), _dumps(p.excluded),
                  None if p.result is None else _dumps(p.result),
-                 None if p.record is None else _dumps(p.record), p.error, p.solved_rev,
+                 p.error, p.solved_rev,
                  p.updated_at, p.project_id, old_id or p.id),
             )
         except sqlite3.IntegrityError as exc:

@@ -1,4 +1,4 @@
-"""Measuring a project's point: its rays (session-JSON dicts, as stored) with the project's
+"""Measuring a project's point: its typed rays (gsgeo.measure.Rays) with the project's
 settings (crs, vertical or geoid, source_crs, sigma_px) through gsgeo.measure.point.
 
 Words: *solve* is the least-squares maths (gsgeo.solve); *measure* is that plus the CRS path
@@ -13,7 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from gsgeo.errors import CRSError, InputError
-from gsgeo.session import SessionPoint, parse_point
+from gsgeo.measure import Measurement, Rays, SolveSettings, measure_point
+from gsgeo.measure.schema import record_of
+from gsgeo.session import parse_rays
 
 
 def json_ready(value: Any) -> Any:
@@ -29,10 +31,10 @@ def json_ready(value: Any) -> Any:
     return value
 
 
-def session_point(point_id: str, rays: list[dict], code: str = "", description: str = "") -> SessionPoint:
-    """Validate rays (session-JSON dicts) into a SessionPoint; errors name ``rays[i].field``."""
-    return parse_point({"id": point_id, "code": code, "description": description,
-                        "rays": rays}, field="")
+def stored_rays(rays: list[dict[str, Any]]) -> Rays:
+    """The typed rays of a point's session-JSON rays as stored (or given); errors name
+    ``rays[i].<member>``."""
+    return parse_rays(rays)[1]
 
 
 def check_excluded(excluded: list[int], n_rays: int, field: str = "excluded") -> list[int]:
@@ -63,18 +65,29 @@ def find_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
     return path
 
 
-def measure(point: SessionPoint, settings: dict[str, Any], excluded: list[int],
-            data_dir: Path | None = None):
-    """The gsgeo.measure.point Measurement of ``point`` with a project's ``settings``."""
-    from gsgeo.session import measure_session_point
-
-    return measure_session_point(point, crs=settings.get("crs"), vertical=settings.get("vertical"),
-                                 geoid=find_geoid(settings.get("geoid"), data_dir),
-                                 source_crs=settings.get("source_crs") or "EPSG:4978",
-                                 sigma_px=float(settings.get("sigma_px") or 1.0),
-                                 exclude=excluded)
+def solve_settings(settings: dict[str, Any], data_dir: Path | None) -> SolveSettings:
+    """A project's settings (checked by gsgeo.service.projects.validate_settings) as the typed
+    core's, the geoid looked up in DATA/geoids/."""
+    return SolveSettings(crs=settings.get("crs"), vertical=settings.get("vertical"),
+                         geoid=find_geoid(settings.get("geoid"), data_dir),
+                         source_crs=settings.get("source_crs") or "EPSG:4978",
+                         sigma_px=float(settings.get("sigma_px") or 1.0))
 
 
-def measured_fields(m) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(result, record) of a Measurement as JSON-ready dicts."""
-    return json_ready(m.to_dict()), json_ready(m.record())
+def measure(rays: Rays, settings: dict[str, Any], excluded: list[int],
+            data_dir: Path | None = None, *, point_id: str = "P", code: str = "",
+            description: str = "") -> Measurement:
+    """The gsgeo.measure.point Measurement of ``rays`` with a project's ``settings``."""
+    return measure_point(rays, solve_settings(settings, data_dir), point_id=point_id,
+                         code=code, description=description, exclude=excluded)
+
+
+def measured_result(m: Measurement) -> dict[str, Any]:
+    """The stored result of a Measurement (to_dict, JSON-ready); its point-schema record is
+    derived from it (gsgeo.measure.schema.record_of), never stored beside it."""
+    return json_ready(m.to_dict())
+
+
+def with_record(result: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The point-schema record of a stored result, or None."""
+    return None if result is None else record_of(result)

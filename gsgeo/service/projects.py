@@ -1,5 +1,9 @@
 """Projects as the API sees them: validation, measuring and re-measuring on top of a Store.
 
+A point's rays arrive typed (gsgeo.measure.Rays, checked once); the store keeps their
+session-JSON form (Rays.to_json) and the measured result, from which the point-schema record
+is derived on reading (gsgeo.measure.schema.record_of), so a rename changes one copy.
+
 Every public method is one transaction. Solving happens inside the write transaction, so a
 point is never stored with a result from other settings than the ones stored with its
 project, and two clients changing the same point cannot lose each other's change.
@@ -16,19 +20,23 @@ from typing import Any
 import numpy as np
 
 from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.measure import Measurement, Rays
 from gsgeo.measure.accuracy import accuracy_report
 from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
 from gsgeo.measure.rays import SolveSettings
-from gsgeo.store.base import Store, Transaction
-from gsgeo.store.checkpoints import CheckPointRow
-from gsgeo.store.measuring import (
+from gsgeo.service.checkpoints import CheckPointRow
+from gsgeo.service.measuring import (
     check_excluded,
     find_geoid,
     json_ready,
     measure,
-    measured_fields,
-    session_point,
+    measured_result,
+    stored_rays,
+    with_record,
 )
+from gsgeo.service.points import PointInput, check_ray_count, point_input, rays_input
+from gsgeo.service.validate import item_id, sigma_px, slug
+from gsgeo.store.base import Store, Transaction
 from gsgeo.store.records import (
     CheckPointRecord,
     ConflictError,
@@ -37,11 +45,9 @@ from gsgeo.store.records import (
     PointRecord,
     Project,
 )
-from gsgeo.store.validate import item_id, sigma_px, slug
 
 SETTINGS = ("crs", "vertical", "geoid", "source_crs", "sigma_px")
 KINDS = {"line": 2, "polygon": 3}  # kind -> minimum number of points
-MAX_RAYS = 1000
 MAX_FEATURE_POINTS = 10_000
 
 
@@ -90,6 +96,24 @@ def validate_settings(settings: dict[str, Any], data_dir: Path | None) -> dict[s
                 raise exc.within("vertical") from None
     find_geoid(out["geoid"], data_dir)
     return out
+
+
+def intersect_request(point: PointInput, settings: dict[str, Any],
+                      data_dir: Path | None) -> tuple[list[int], dict[str, Any]]:
+    """Check a point measured without storing it (POST /api/intersect): its excluded rays
+    (errors name ``exclude``) and ``settings`` as a project's. Returns both, checked, for
+    gsgeo.service.measuring.measure."""
+    check_ray_count(len(point.rays))
+    excluded = check_excluded(list(point.excluded), len(point.rays), "exclude")
+    return excluded, validate_settings(settings, data_dir)
+
+
+def intersect_point(point: PointInput, settings: dict[str, Any],
+                    data_dir: Path | None) -> Measurement:
+    """Measure one point without storing it: :func:`intersect_request` and measure."""
+    excluded, checked = intersect_request(point, settings, data_dir)
+    return measure(point.rays, checked, excluded, data_dir, point_id=point.id or "P",
+                   code=point.code, description=point.description)
 
 
 class Projects:
@@ -210,12 +234,19 @@ class Projects:
                 raise NotFoundError(f"project '{pid}' does not exist")
 
     # points ---------------------------------------------------------------------------
-    def _measure_into(self, pt: PointRecord, p: Project, strict: bool = False) -> None:
-        """Solve ``pt`` with the settings of ``p``; on failure store the reason (or raise)."""
-        sp = session_point(pt.id, pt.rays, pt.code, pt.description)
+    def _measure_into(self, pt: PointRecord, p: Project, strict: bool = False,
+                      rays: Rays | None = None) -> None:
+        """Measure ``pt`` with the settings of ``p``; on failure store the reason (or raise).
+
+        ``rays``: the point's typed rays when the caller has them; otherwise its stored rays
+        are read.
+        """
         try:
-            m = measure(sp, p.settings(), pt.excluded, self.data_dir)
-            pt.result, pt.record = measured_fields(m)
+            typed = rays if rays is not None else stored_rays(pt.rays)
+            m = measure(typed, p.settings(), pt.excluded, self.data_dir, point_id=pt.id,
+                        code=pt.code, description=pt.description)
+            pt.result = measured_result(m)
+            pt.record = with_record(pt.result)
             pt.error = None
         except GsgeoError as exc:
             if strict:
@@ -225,9 +256,13 @@ class Projects:
         pt.solved_rev = p.settings_rev
 
     def list_points(self, pid: str) -> list[PointRecord]:
+        """The project's points, each with its point-schema record derived from its result."""
         with self.store.transaction(write=False) as tx:
             self._project(tx, pid)
-            return tx.list_points(pid)
+            pts = tx.list_points(pid)
+        for q in pts:
+            q.record = with_record(q.result)
+        return pts
 
     def get_point(self, pid: str, point_id: str) -> PointRecord:
         with self.store.transaction(write=False) as tx:
@@ -238,40 +273,32 @@ class Projects:
         pt = tx.get_point(pid, point_id)
         if pt is None:
             raise NotFoundError(f"point '{point_id}' does not exist in project '{pid}'")
+        pt.record = with_record(pt.result)
         return pt
 
-    @staticmethod
-    def _rays(rays: Any, field: str = "rays") -> list[dict[str, Any]]:
-        if not isinstance(rays, list):
-            raise InputError("expected a list of rays", field=field)
-        if len(rays) < 2:
-            raise InputError(f"a point needs at least two rays, got {len(rays)}", field=field)
-        if len(rays) > MAX_RAYS:
-            raise InputError(f"more than {MAX_RAYS} rays", field=field)
-        sp = session_point("x", rays)  # validates each ray, errors name rays[i]...
-        return [r.to_dict() for r in sp.rays]
-
-    def add_point(self, pid: str, doc: dict[str, Any]) -> PointRecord:
-        """Solve and store a point: doc = {id?, code?, description?, rays, excluded?}.
+    def add_point(self, pid: str, point: PointInput | dict[str, Any]) -> PointRecord:
+        """Measure and store a point: a PointInput (typed rays) or a mapping
+        {id?, code?, description?, rays, excluded?} in the session-JSON shape.
 
         A point whose rays cannot be intersected is refused (GeometryError) and not stored.
         """
-        rays = self._rays(doc.get("rays"))
-        code = _text(doc.get("code"), "code", 200)
-        description = _text(doc.get("description"), "description")
-        excluded = check_excluded(list(doc.get("excluded") or []), len(rays))
+        new = point if isinstance(point, PointInput) else point_input(point)
+        check_ray_count(len(new.rays))
+        code = _text(new.code, "code", 200)
+        description = _text(new.description, "description")
+        excluded = check_excluded(list(new.excluded), len(new.rays))
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
-            if doc.get("id") is None:
+            if new.id is None:
                 point_id = self._next_id(tx.point_ids(pid))
             else:
-                point_id = item_id(doc["id"], "id")
+                point_id = item_id(new.id, "id")
                 if tx.get_point(pid, point_id) is not None:
                     raise ConflictError(f"point '{point_id}' already exists in project '{pid}'",
                                         field="id")
-            pt = PointRecord(project_id=pid, id=point_id, rays=rays, code=code,
+            pt = PointRecord(project_id=pid, id=point_id, rays=new.rays.to_json(), code=code,
                              description=description, excluded=excluded)
-            self._measure_into(pt, p, strict=True)
+            self._measure_into(pt, p, strict=True, rays=new.rays)
             tx.insert_point(pt)
             return pt
 
@@ -296,8 +323,10 @@ class Projects:
             p = self._project(tx, pid)
             pt = self._point(tx, pid, point_id)
             remeasure = False
+            typed = None
             if changes.get("rays") is not None:
-                pt.rays = self._rays(changes["rays"])
+                typed = rays_input(changes["rays"])
+                pt.rays = typed.to_json()
                 pt.excluded = []
                 remeasure = True
             excluded = set(pt.excluded)
@@ -326,12 +355,11 @@ class Projects:
                     raise ConflictError(f"point '{pt.id}' already exists in project '{pid}'",
                                         field="id")
             if remeasure or pt.solved_rev != p.settings_rev:
-                self._measure_into(pt, p, strict=True)
-            else:
-                for blob in (pt.result, pt.record):
-                    if blob is not None:
-                        blob.update({"point_id": pt.id, "code": pt.code,
-                                     "description": pt.description})
+                self._measure_into(pt, p, strict=True, rays=typed)
+            elif pt.result is not None:
+                pt.result.update({"point_id": pt.id, "code": pt.code,
+                                  "description": pt.description})
+                pt.record = with_record(pt.result)
             tx.update_point(pt, old_id=old_id)
             if pt.id != old_id:
                 for kind in KINDS:
@@ -374,10 +402,11 @@ class Projects:
                 if tx.get_point(pid, point_id) is not None:
                     raise ConflictError(f"point '{point_id}' already exists in project '{pid}'",
                                         field=f"{at}.id")
-                pt = PointRecord(project_id=pid, id=point_id, rays=[r.to_dict() for r in sp.rays],
+                typed = sp.to_rays()
+                pt = PointRecord(project_id=pid, id=point_id, rays=typed.to_json(),
                                  code=sp.code, description=sp.description)
                 try:
-                    self._measure_into(pt, p, strict=True)
+                    self._measure_into(pt, p, strict=True, rays=typed)
                 except GsgeoError as exc:
                     raise exc.part_of(at, f"point '{point_id}'") from None
                 tx.insert_point(pt)
@@ -425,15 +454,15 @@ class Projects:
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
             feats = tx.list_features(pid, kind)
-            pts = {q.id: q for q in tx.list_points(pid)}
-        return [(f, feature_measures(f, pts, p)) for f in feats]
+            recs = {q.id: with_record(q.result) for q in tx.list_points(pid)}
+        return [(f, feature_measures(f, recs, p)) for f in feats]
 
     def get_feature(self, pid: str, kind: str, fid: str) -> tuple[FeatureRecord, dict[str, Any]]:
         with self.store.transaction(write=False) as tx:
             f = self._feature(tx, pid, kind, fid)
             p = self._project(tx, pid)
-            pts = {q.id: q for q in tx.list_points(pid)}
-        return f, feature_measures(f, pts, p)
+            recs = {q.id: with_record(q.result) for q in tx.list_points(pid)}
+        return f, feature_measures(f, recs, p)
 
     def _feature(self, tx: Transaction, pid: str, kind: str, fid: str) -> FeatureRecord:
         self._project(tx, pid)
@@ -535,8 +564,9 @@ class Projects:
         if p.crs is None:
             raise InputError(f"project '{pid}' has no grid CRS; set one to compare with "
                              "check points", field="crs")
-        solved = {q.id: q.record for q in pts if q.record is not None
-                  and q.record.get("easting") is not None}
+        records = {q.id: with_record(q.result) for q in pts}
+        solved = {k: r for k, r in records.items() if r is not None
+                  and r.get("easting") is not None}
         matched = [c for c in cps if c.id in solved]
         hint = np.array([np.nan if solved[c.id].get("h_wgs84") is None
                          else solved[c.id]["h_wgs84"] for c in matched], dtype=float)
@@ -576,21 +606,22 @@ def check_points_in_grid(cps: list[CheckPointRecord], project: Project,
     return points_in_grid(xyz, [c.crs for c in cps], settings, crs=crs, height_hint=height_hint)
 
 
-def feature_measures(f: FeatureRecord, points: dict[str, PointRecord],
+def feature_measures(f: FeatureRecord, records: dict[str, dict[str, Any] | None],
                      project: Project) -> dict[str, Any]:
     """Lengths (line) or area and perimeter (polygon) with 1-sigma values, in metres and m²,
     from the points' grid coordinates and covariances (gsgeo.measure.features); an ``error``
-    entry says why they cannot be computed."""
+    entry says why they cannot be computed. ``records``: point id -> its point-schema record
+    (None for a point that failed)."""
     from gsgeo.crs.resolve import grid_crs
     from gsgeo.measure.features import line_measures, polygon_measures
 
     recs = []
     for q in f.point_ids:
-        pt = points.get(q)
-        if pt is None or pt.record is None or pt.record.get("easting") is None:
-            why = "does not exist" if pt is None else "has no grid coordinates"
+        rec = records.get(q)
+        if rec is None or rec.get("easting") is None:
+            why = "does not exist" if q not in records else "has no grid coordinates"
             return {"error": f"point '{q}' {why}"}
-        recs.append(pt.record)
+        recs.append(rec)
     xyz = np.array([[r["easting"], r["northing"],
                      math.nan if r.get("height") is None else r["height"]] for r in recs])
     keys = (("cov_ee", "cov_en", "cov_eh"), ("cov_en", "cov_nn", "cov_nh"),

@@ -24,7 +24,7 @@ from typing import Any
 import orjson
 
 from gsgeo.errors import InputError
-from gsgeo.store.validate import item_id
+from gsgeo.service.validate import item_id
 
 ID_COLUMNS = ("point_id", "id", "name", "label")
 X_COLUMNS = ("easting", "e", "x", "lon", "longitude")

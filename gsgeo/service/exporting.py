@@ -10,12 +10,18 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.export import write_measurements
-from gsgeo.store import Projects
-from gsgeo.store.measuring import measure, session_point
-from gsgeo.store.projects import check_points_in_grid, feature_measures, validate_settings
+from gsgeo.measure import Measurement
+from gsgeo.service.measuring import measure, stored_rays
+from gsgeo.service.projects import (
+    Projects,
+    check_points_in_grid,
+    feature_measures,
+    validate_settings,
+)
 
 SUFFIX = {"gpkg": ".gpkg", "geojson": ".geojson", "geojson-grid": ".geojson", "csv": ".csv"}
 
@@ -32,12 +38,14 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
         if project.vertical or project.geoid:
             settings |= {"vertical": None, "geoid": None}  # a vertical datum belongs to its grid
         settings = validate_settings(settings, svc.data_dir)
-        measurements, by_id = [], {}
+        measurements: list[Measurement | dict[str, Any]] = []
+        by_id: dict[str, dict[str, Any] | None] = {}
         for pt in points:
             try:
-                m = measure(session_point(pt.id, pt.rays, pt.code, pt.description), settings,
-                            pt.excluded, svc.data_dir)
+                m = measure(stored_rays(pt.rays), settings, pt.excluded, svc.data_dir,
+                            point_id=pt.id, code=pt.code, description=pt.description)
             except GsgeoError:
+                by_id[pt.id] = None
                 continue
             measurements.append(m)
             by_id[pt.id] = m.record()
@@ -47,19 +55,18 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
             raise InputError(f"project '{pid}' has no grid CRS; give ?crs=EPSG:... to export",
                              field="crs")
         measurements = [pt.result for pt in points if pt.result is not None]
-        by_id = {pt.id: pt.record for pt in points if pt.record is not None}
+        by_id = {pt.id: pt.record for pt in points}
         grid_crs = project.crs
     if not measurements:
         raise InputError(f"project '{pid}' has no solved points to export")
 
     proj = replace(project, crs=grid_crs,
                    vertical=project.vertical if grid_crs == project.crs else None)
-    recs = {pt.id: replace(pt, record=by_id.get(pt.id)) for pt in points}
-    kept: dict[str, list] = {"line": [], "polygon": []}
+    kept: dict[str, list[dict[str, Any]]] = {"line": [], "polygon": []}
     skipped: list[str] = []
     for kind in ("line", "polygon"):
         for f, _ in svc.list_features(pid, kind):
-            ms = feature_measures(f, recs, proj)
+            ms = feature_measures(f, by_id, proj)
             if "error" in ms:
                 skipped.append(f"{kind} {f.id}: {ms['error']}")
             else:

@@ -1,0 +1,52 @@
+"""gsgeo.service: projects as the HTTP API and the commands use them, over gsgeo.store.
+
+- ``projects``: :class:`Projects`, one transaction per call (projects, points, lines,
+  polygons, check points, accuracy);
+- ``measuring``: a stored point's rays with a project's settings through gsgeo.measure;
+- ``exporting``: a project as a GeoPackage, GeoJSON or CSV file;
+- ``checkpoints``: check-point files (CSV, GeoJSON, GeoPackage) read into rows;
+- ``validate``: ids and settings checks shared with the HTTP layer.
+
+The store behind it keeps records only (gsgeo.store); :func:`open_projects` opens both.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gsgeo.service.points import PointInput
+from gsgeo.service.projects import Projects
+from gsgeo.store import (
+    DB_NAME,
+    CheckPointRecord,
+    ConflictError,
+    FeatureRecord,
+    NotFoundError,
+    PointRecord,
+    Project,
+    Store,
+    StoreError,
+    open_store,
+)
+
+
+def open_projects(data_dir: str | Path, store: Store | None = None) -> Projects:
+    """The project service over ``store`` or the data directory's SQLite store."""
+    return Projects(store if store is not None else open_store(data_dir), data_dir)
+
+
+__all__ = [
+    "DB_NAME",
+    "CheckPointRecord",
+    "ConflictError",
+    "FeatureRecord",
+    "NotFoundError",
+    "PointInput",
+    "PointRecord",
+    "Project",
+    "Projects",
+    "Store",
+    "StoreError",
+    "open_projects",
+    "open_store",
+]

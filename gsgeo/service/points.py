@@ -1,0 +1,58 @@
+"""A point as a request gives it: typed rays and what describes them.
+
+The HTTP layer builds a :class:`PointInput` from its validated body (the rays straight into
+gsgeo.measure.Rays); a mapping in the session-JSON shape goes through :func:`point_input`.
+Either way the rays are checked once, by Rays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from gsgeo.errors import InputError
+from gsgeo.measure import Rays
+from gsgeo.service.measuring import stored_rays
+
+MAX_RAYS = 1000
+
+
+@dataclass(frozen=True)
+class PointInput:
+    """A new point: ``rays`` (rendered ECEF), ``id`` (None: the next free P<n>), ``code``,
+    ``description`` and ``excluded`` 0-based ray indices left out of the solution."""
+
+    rays: Rays
+    id: str | None = None
+    code: str = ""
+    description: str = ""
+    excluded: list[int] = field(default_factory=list)
+
+
+def check_ray_count(n: int, field: str = "rays") -> None:
+    """InputError unless 2 <= n <= MAX_RAYS."""
+    if n < 2:
+        raise InputError(f"a point needs at least two rays, got {n}", field=field)
+    if n > MAX_RAYS:
+        raise InputError(f"more than {MAX_RAYS} rays", field=field)
+
+
+def rays_input(rays: Any, field: str = "rays") -> Rays:
+    """Session-JSON ray objects -> Rays (2 to MAX_RAYS of them); errors name ``rays[i]...``."""
+    if isinstance(rays, Rays):
+        check_ray_count(len(rays), field)
+        return rays
+    if not isinstance(rays, list):
+        raise InputError("expected a list of rays", field=field)
+    check_ray_count(len(rays), field)
+    return stored_rays(rays)
+
+
+def point_input(doc: Mapping[str, Any]) -> PointInput:
+    """{id?, code?, description?, rays, excluded?} in the session-JSON shape -> PointInput."""
+    code, description = doc.get("code"), doc.get("description")
+    return PointInput(rays=rays_input(doc.get("rays")), id=doc.get("id"),
+                      code="" if code is None else code,
+                      description="" if description is None else description,
+                      excluded=list(doc.get("excluded") or []))
