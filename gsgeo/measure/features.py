@@ -21,7 +21,7 @@ length or area.) tests/test_export_features.py checks the sigmas against Monte-C
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -286,7 +286,7 @@ class PolygonArrays:
     counterclockwise: np.ndarray  # (K,) bool
 
 
-def _groups(sizes: np.ndarray):
+def _groups(sizes: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
     """(n, indices of the features with n points) for each distinct size."""
     for n in np.unique(sizes):
         yield int(n), np.flatnonzero(sizes == n)

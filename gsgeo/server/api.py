@@ -25,7 +25,7 @@ from gsgeo.errors import InputError
 from gsgeo.server import models as m
 from gsgeo.server.scenes import list_scenes
 from gsgeo.service import CheckPointRecord, FeatureRecord, PointRecord, Project, Projects
-from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
+from gsgeo.service.checkpoints import CheckPointRow
 from gsgeo.service.measuring import measure
 from gsgeo.service.projects import intersect_point
 from gsgeo.service.projects import intersect_request as check_intersect
@@ -304,10 +304,6 @@ def list_check_points(pid: PID, request: Request) -> dict[str, Any]:
              summary="Add check points given as JSON in a stated CRS")
 def add_check_points(pid: PID, body: m.CheckPointsCreate, request: Request) -> dict[str, Any]:
     rows = [CheckPointRow(c.id, c.x, c.y, c.z) for c in body.points]
-    ids = [r.id for r in rows]
-    if len(set(ids)) != len(ids):
-        dup = next(i for i in ids if ids.count(i) > 1)
-        raise InputError(f"duplicate id '{dup}'", field="points")
     n = svc(request).add_check_points(pid, rows, body.crs, role=body.role, replace=body.replace)
     return {"imported": n}
 
@@ -324,18 +320,8 @@ def import_check_points(
     role: Annotated[Literal["check", "control"], Form()] = "check",
     replace: Annotated[bool, Form()] = False,
 ) -> dict[str, Any]:
-    fmt = format or format_from_name(file.filename)
-    if fmt is None:
-        raise InputError(f"cannot tell the format of '{file.filename}'; give format="
-                         f"{'|'.join(FORMATS)}", field="format")
-    data = file.file.read()
-    rows, file_crs = read_check_points(data, fmt, file.filename)
-    crs = (crs or "").strip() or file_crs or ("EPSG:4979" if fmt == "geojson" else None)
-    if crs is None:
-        raise InputError("state the CRS the file's coordinates are in, e.g. EPSG:27700",
-                         field="crs")
-    n = svc(request).add_check_points(pid, rows, crs, role=role, replace=replace,
-                                      source=(file.filename or "")[:300])
+    n, crs, fmt = svc(request).import_check_point_file(
+        pid, file.file.read(), file.filename, crs=crs, fmt=format, role=role, replace=replace)
     return {"imported": n, "crs": crs, "format": fmt}
 
 

@@ -12,6 +12,7 @@ import json
 import logging
 import os
 import sqlite3
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -166,7 +167,7 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     intersect_pool = IntersectPool(config.solver_threads)
 
     @asynccontextmanager
-    async def lifespan(_app: FastAPI):
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         from gsgeo.server.api import warm_intersect
 
         await intersect_pool.warm_up(warm_intersect)

@@ -24,7 +24,7 @@ from gsgeo.measure import Measurement, Rays
 from gsgeo.measure.accuracy import accuracy_report
 from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
 from gsgeo.measure.rays import SolveSettings
-from gsgeo.service.checkpoints import CheckPointRow
+from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
 from gsgeo.service.measuring import (
     check_excluded,
     find_geoid,
@@ -122,7 +122,7 @@ class Projects:
     ``data_dir`` is where geoid grids (DATA/geoids/) and scenes (DATA/scenes/) live.
     """
 
-    def __init__(self, store: Store, data_dir: str | Path | None = None):
+    def __init__(self, store: Store, data_dir: str | Path | None = None) -> None:
         self.store = store
         self.data_dir = Path(data_dir) if data_dir is not None else None
 
@@ -526,9 +526,14 @@ class Projects:
 
     def add_check_points(self, pid: str, rows: list[CheckPointRow], crs: str, *,
                          role: str = "check", source: str = "", replace: bool = False) -> int:
-        """Store check points given in ``crs`` (all or nothing); ``replace`` drops the old ones."""
+        """Store check points given in ``crs`` (all or nothing); ``replace`` drops the old ones.
+        A repeated id is an InputError about ``points``."""
         from gsgeo.crs.resolve import parse_crs
 
+        ids = [r.id for r in rows]
+        if len(set(ids)) != len(ids):
+            dup = next(i for i in ids if ids.count(i) > 1)
+            raise InputError(f"duplicate id '{dup}'", field="points")
         if role not in ("check", "control"):
             raise InputError("must be 'check' or 'control'", field="role")
         try:
@@ -543,6 +548,25 @@ class Projects:
                 tx.delete_all_check_points(pid)
             tx.upsert_check_points(recs)
         return len(recs)
+
+    def import_check_point_file(self, pid: str, data: bytes, filename: str | None, *,
+                                crs: str | None = None, fmt: str | None = None,
+                                role: str = "check", replace: bool = False) -> tuple[int, str, str]:
+        """Check points from a CSV, GeoJSON or GeoPackage file (format from ``fmt`` or the
+        file name; CRS from ``crs``, else the file's, else EPSG:4979 for GeoJSON).
+        Returns (number stored, CRS, format)."""
+        fmt = fmt or format_from_name(filename)
+        if fmt is None:
+            raise InputError(f"cannot tell the format of '{filename}'; give format="
+                             f"{'|'.join(FORMATS)}", field="format")
+        rows, file_crs = read_check_points(data, fmt, filename)
+        crs = (crs or "").strip() or file_crs or ("EPSG:4979" if fmt == "geojson" else None)
+        if crs is None:
+            raise InputError("state the CRS the file's coordinates are in, e.g. EPSG:27700",
+                             field="crs")
+        n = self.add_check_points(pid, rows, crs, role=role, replace=replace,
+                                  source=(filename or "")[:300])
+        return n, crs, fmt
 
     def delete_check_point(self, pid: str, cid: str) -> None:
         with self.store.transaction() as tx:
