@@ -6,8 +6,11 @@
 
 The file is read with bounds: at most ``MAX_SESSION_BYTES``, strict UTF-8 JSON parsed by orjson
 (nesting deeper than 1024 levels, numbers beyond a 64-bit float, NaN / Infinity literals and
-unpaired surrogates are refused with their line and column). Ranges of sigma_px, ifov, origins
-and directions and the id rule come from :mod:`gsgeo.limits`.
+unpaired surrogates are refused with their line and column). This module checks the JSON
+shape; a point's rays become :class:`gsgeo.measure.Rays`, whose constructor checks the ranges
+of ifov, origins, directions and model matrices once (:mod:`gsgeo.limits`, as sigma_px and
+the id rule here). :func:`measure_session` and :func:`measure_session_point` measure
+sessions and their points through gsgeo.measure.
 """
 
 from __future__ import annotations

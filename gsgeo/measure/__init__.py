@@ -1,12 +1,15 @@
 """gsgeo.measure: the measurement core between the geodesy (gsgeo.crs, gsgeo.solve) and
-everything that keeps or shows results (gsgeo.export, gsgeo.store, gsgeo.server).
+everything that reads input or keeps and shows results (gsgeo.session, gsgeo.export,
+gsgeo.service); it imports none of them.
 
 - ``rays``: the typed input, Rays (a point's aims, rendered ECEF, validated once) and
   SolveSettings;
 - ``point``: a point's rays (rendered ECEF) -> Measurement in ECEF and the grid CRS;
 - ``schema``: Measurement, its point-schema record (RECORD_KEYS), MeasurementFailure;
 - ``features``: lengths, areas and perimeters of lines and polygons with propagated sigmas
-  (plain (N, 3) / (N, 3, 3) arrays in grid units, no CRS).
+  (plain (N, 3) / (N, 3, 3) arrays in grid units, no CRS);
+- ``checkpoints``: check points into a project's grid by the measured points' own path;
+- ``accuracy``: measured minus check statistics (RMSE, ME, SD).
 """
 
 from gsgeo.measure.features import LineMeasures, PolygonMeasures, line_measures, polygon_measures
