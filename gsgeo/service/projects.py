@@ -256,13 +256,10 @@ class Projects:
         pt.solved_rev = p.settings_rev
 
     def list_points(self, pid: str) -> list[PointRecord]:
-        """The project's points, each with its point-schema record derived from its result."""
+        """The project's points (each record derived from its result as it is read)."""
         with self.store.transaction(write=False) as tx:
             self._project(tx, pid)
-            pts = tx.list_points(pid)
-        for q in pts:
-            q.record = with_record(q.result)
-        return pts
+            return tx.list_points(pid)
 
     def get_point(self, pid: str, point_id: str) -> PointRecord:
         with self.store.transaction(write=False) as tx:
@@ -273,7 +270,6 @@ class Projects:
         pt = tx.get_point(pid, point_id)
         if pt is None:
             raise NotFoundError(f"point '{point_id}' does not exist in project '{pid}'")
-        pt.record = with_record(pt.result)
         return pt
 
     def add_point(self, pid: str, point: PointInput | dict[str, Any]) -> PointRecord:
@@ -454,14 +450,14 @@ class Projects:
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
             feats = tx.list_features(pid, kind)
-            recs = {q.id: with_record(q.result) for q in tx.list_points(pid)}
+            recs = {q.id: q.record for q in tx.list_points(pid)}
         return [(f, feature_measures(f, recs, p)) for f in feats]
 
     def get_feature(self, pid: str, kind: str, fid: str) -> tuple[FeatureRecord, dict[str, Any]]:
         with self.store.transaction(write=False) as tx:
             f = self._feature(tx, pid, kind, fid)
             p = self._project(tx, pid)
-            recs = {q.id: with_record(q.result) for q in tx.list_points(pid)}
+            recs = {q.id: q.record for q in tx.list_points(pid)}
         return f, feature_measures(f, recs, p)
 
     def _feature(self, tx: Transaction, pid: str, kind: str, fid: str) -> FeatureRecord:
@@ -588,9 +584,8 @@ class Projects:
         if p.crs is None:
             raise InputError(f"project '{pid}' has no grid CRS; set one to compare with "
                              "check points", field="crs")
-        records = {q.id: with_record(q.result) for q in pts}
-        solved = {k: r for k, r in records.items() if r is not None
-                  and r.get("easting") is not None}
+        solved = {q.id: q.record for q in pts if q.record is not None
+                  and q.record.get("easting") is not None}
         matched = [c for c in cps if c.id in solved]
         hint = np.array([np.nan if solved[c.id].get("h_wgs84") is None
                          else solved[c.id]["h_wgs84"] for c in matched], dtype=float)
