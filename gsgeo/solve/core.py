@@ -13,11 +13,15 @@ inverse this is several times faster than einsum and ``numpy.linalg`` over milli
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from gsgeo.solve.linalg import sym3_inverse_entries
+from gsgeo.solve.linalg import FloatArray, sym3_inverse_entries
+
+#: One array per Cartesian component (x, y, z).
+Components = Sequence[FloatArray]
 
 #: Iterations of the angular model at most; ranges change little after the first pass.
 MAX_ITERATIONS = 20
@@ -47,7 +51,9 @@ def unit_directions(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return directions / norm[..., None], norm
 
 
-def _solve(o, d, do, w):
+def _solve(
+    o: Components, d: Components, do: FloatArray, w: FloatArray | None
+) -> tuple[Components, Components]:
     """Solve the normal equations for component arrays o = (ox, oy, oz), d = (dx, dy, dz), (N, M).
 
     Returns the point components (each (M,)) and the six unique entries of the inverse normal
@@ -79,7 +85,7 @@ def _solve(o, d, do, w):
     return (x, y, z), q
 
 
-def _ranges(p, o, d):
+def _ranges(p: Components, o: Components, d: Components) -> FloatArray:
     return (
         (p[0] - o[0]) * d[0] + (p[1] - o[1]) * d[1] + (p[2] - o[2]) * d[2]
     )
@@ -99,12 +105,12 @@ def solve_core(
     centre = origins.mean(axis=1)
     o = tuple(np.ascontiguousarray(origins[..., k].T - centre[:, k]) for k in range(3))
     d = tuple(np.ascontiguousarray(directions_unit[..., k].T) for k in range(3))
-    f = None if ifov is None else np.ascontiguousarray(ifov.T)
     do = d[0] * o[0] + d[1] * o[1] + d[2] * o[2]
     p, q = _solve(o, d, do, None)
     weights = sigma = None
     iterations = 1
     if ifov is not None:
+        f = np.ascontiguousarray(ifov.T)
         # Angular model: sigma_i = sigma_px * ifov_i * range_i; iterate because the ranges
         # depend on the point. Points that have converged drop out of later passes.
         p = [c.copy() for c in p]
@@ -177,7 +183,7 @@ def solve_one(
     eye = np.eye(3)
     do = np.einsum("ij,ij->i", d, o)
 
-    def solve(w):
+    def solve(w: FloatArray | None) -> tuple[FloatArray, FloatArray]:
         wd = d if w is None else d * w[:, None]
         wo = o if w is None else o * w[:, None]
         wsum = d.shape[0] if w is None else w.sum()

@@ -36,6 +36,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from gsgeo import limits
 from gsgeo.errors import GeometryError, InputError
@@ -81,7 +82,7 @@ class IntersectionResult:
     def to_dict(self) -> dict:
         """Plain JSON-ready dictionary (lists and floats)."""
 
-        def arr(a):
+        def arr(a: npt.ArrayLike | None) -> object:
             return None if a is None else np.asarray(a, dtype=float).tolist()
 
         return {
@@ -119,7 +120,7 @@ class BatchResult:
     valid: np.ndarray  # (M,) bool
 
 
-def _as_rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
+def _as_rays(origins: npt.ArrayLike, directions: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     try:
         o = np.asarray(origins, dtype=np.float64)
         d = np.asarray(directions, dtype=np.float64)
@@ -128,7 +129,7 @@ def _as_rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
     return o, d
 
 
-def _check_ifov(ifov, shape: tuple[int, ...]) -> np.ndarray | None:
+def _check_ifov(ifov: npt.ArrayLike | None, shape: tuple[int, ...]) -> np.ndarray | None:
     if ifov is None:
         return None
     try:
@@ -150,7 +151,7 @@ def _check_ifov(ifov, shape: tuple[int, ...]) -> np.ndarray | None:
     return f
 
 
-def _check_sigma_px(sigma_px) -> float:
+def _check_sigma_px(sigma_px: float) -> float:
     try:
         s = float(sigma_px)
     except (TypeError, ValueError, OverflowError):
@@ -221,10 +222,10 @@ def _min_abs_cos(d: np.ndarray) -> np.ndarray:
 
 
 def intersect(
-    origins,
-    directions,
+    origins: npt.ArrayLike,
+    directions: npt.ArrayLike,
     *,
-    ifov=None,
+    ifov: npt.ArrayLike | None = None,
     sigma_px: float = 1.0,
 ) -> IntersectionResult:
     """Least-squares intersection of N >= 2 rays in one Cartesian frame.
@@ -302,6 +303,8 @@ def intersect(
         weights = sigma_m = None
     else:
         model = "angular"
+        # The angular model always returns weights and a-priori sigmas.
+        assert sol.weights is not None and sol.sigma_m is not None
         weights, sigma_m = sol.weights[0], sol.sigma_m[0]
         res_px = res_m / (f * ranges)
         p = float(chi2_sf(vtpv, dof))
@@ -360,10 +363,10 @@ def _chi2_quantile(p: float, dof: int) -> float:
 
 
 def intersect_batch(
-    origins,
-    directions,
+    origins: npt.ArrayLike,
+    directions: npt.ArrayLike,
     *,
-    ifov=None,
+    ifov: npt.ArrayLike | None = None,
     sigma_px: float = 1.0,
 ) -> BatchResult:
     """`intersect` vectorised over M points of N rays each, without a Python loop over points.
@@ -430,6 +433,7 @@ def intersect_batch(
             scale = s0sq
         else:
             scale = np.where(sol.vtpv > chi2_limit, s0sq, 1.0)
+            assert res_px is not None  # allocated whenever there is an ifov
             res_px[sl] = sol.residuals_m / (fc * sol.ranges)
         points[sl] = sol.points
         covs[sl] = sol.normal_inverse * scale[:, None, None]

@@ -8,12 +8,19 @@ Python loop.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
+
+#: Arrays of float64 numbers, the type of every coordinate, covariance and residual array.
+FloatArray = npt.NDArray[np.float64]
+Entries6 = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 
 
-def sym3_inverse_entries(n00, n01, n02, n11, n12, n22):
+def sym3_inverse_entries(
+    n00: FloatArray, n01: FloatArray, n02: FloatArray, n11: FloatArray, n12: FloatArray, n22: FloatArray
+) -> tuple[Entries6, FloatArray]:
     """The six unique entries of the inverse of symmetric 3 x 3 matrices, and the determinant.
 
-    Each argument is one entry over any stack shape (arrays or floats); returns
+    Each argument is one entry over any stack shape; returns
     ``(i00, i01, i02, i11, i12, i22), det``, non-finite where the determinant is zero.
     """
     c00 = n11 * n22 - n12 * n12
