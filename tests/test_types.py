@@ -19,7 +19,9 @@ ROOT = Path(__file__).resolve().parents[1]
 CLEAN = [
     "__init__.py", "cli.py", "errors.py", "limits.py",
     "commands/crs.py", "commands/serve.py", "commands/tiles.py",
-    "crs/confidence.py", "crs/ellipsoid.py", "crs/frames.py", "crs/modelmatrix.py", "crs/transformers.py",
+    "commands/demo.py",
+    "crs/__init__.py", "crs/confidence.py", "crs/discovery.py", "crs/ellipsoid.py", "crs/frames.py",
+    "crs/geoid.py", "crs/grid.py", "crs/modelmatrix.py", "crs/resolve.py", "crs/transformers.py",
     "solve/core.py", "solve/intersection.py", "solve/linalg.py", "solve/outliers.py", "solve/simulate.py",
     "solve/stats.py",
     "tiles/gltf.py", "tiles/lod.py", "tiles/outdir.py", "tiles/placement.py", "tiles/splats.py",

@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     from gsgeo.commands import serve
 
     token, generated = serve.resolve_token(args.host)
-    if generated:
+    if generated and token is not None:
         # off loopback the API needs a token: make the one serve will use now, so that the
         # address printed here opens the viewer (it keeps the token after the first visit)
         os.environ["GSGEO_TOKEN"] = token

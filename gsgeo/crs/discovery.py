@@ -35,7 +35,7 @@ def _catalogue(kinds: tuple[str, ...]) -> tuple[CRSMatch, ...]:
     for info in query_crs_info(pj_types=types, allow_deprecated=True):
         rows.append(CRSMatch(f"{info.auth_name}:{info.code}", info.name,
                              info.type.name.replace("_CRS", "").lower(),
-                             info.area_of_use.name if info.area_of_use else "",
+                             (info.area_of_use.name or "") if info.area_of_use else "",
                              info.deprecated))
     return tuple(rows)
 
@@ -94,7 +94,7 @@ def describe_crs(text: str, source: str = "EPSG:4978") -> dict:
         out["projection"] = None if proj is None else proj.method_name
     except Exception:  # noqa: BLE001
         out["projection"] = None
-    ops = []
+    ops: list[dict[str, object]] = []
     src = source_crs(source)
     target = crs_id(crs, crs.to_wkt())
     if (crs.is_projected or crs.is_compound or crs.is_geographic or crs.is_vertical) and a is not None:

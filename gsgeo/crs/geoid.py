@@ -64,11 +64,11 @@ class GeoidGrid:
         bad = ~np.isfinite(n)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            w, s, ee, nn = self.bounds
+            w, so, ee, nn = self.bounds
             raise DatumError(
                 f"the point at {float(np.ravel(x)[i]):.6f}, {float(np.ravel(y)[i]):.6f} lies "
                 f"outside the geoid grid {self.path} (it covers x {w:g}..{ee:g}, "
-                f"y {s:g}..{nn:g}) or on a no-data cell"
+                f"y {so:g}..{nn:g}) or on a no-data cell"
             )
         if self.sigma is not None:
             s = _bilinear(self.sigma, row, col, wrap=self.global_lon)

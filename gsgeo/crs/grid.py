@@ -86,6 +86,7 @@ class GridPoints:
 
     @property
     def sigmas(self) -> np.ndarray:
+        assert self.covariance is not None, "no covariance"
         return np.sqrt(np.einsum("mii->mi", self.covariance))
 
     def point(self, i: int) -> GridPoint:
@@ -128,11 +129,12 @@ class GridPoint:
     @classmethod
     def build(cls, e, n, h, cov, crs, height_type, vdatum, op, acc, lon, lat, hw, he, warnings):
         if cov is None:
-            s = (None, None, None)
-            ell = (None, None, None)
+            s: tuple[float | None, float | None, float | None] = (None, None, None)
+            ell: tuple[float | None, float | None, float | None] = (None, None, None)
             axes = None
         else:
-            s = tuple(float(math.sqrt(max(cov[i, i], 0.0))) for i in range(3))
+            s0, s1, s2 = (float(math.sqrt(max(cov[i, i], 0.0))) for i in range(3))
+            s = (s0, s1, s2)
             a, b, t = ellipse_95(cov[:2, :2])
             ell = (float(a), float(b), float(t))
             axes = ellipsoid_axes_95(cov)
@@ -352,6 +354,7 @@ def _heights(src, g: GridCRS, lon, lat, h, geoid, crs_text):
     t = inside[0]
     _, _, hh = t.transform(lon, lat, h, errcheck=False)
     hh = np.asarray(hh, dtype=np.float64)
+    assert g.vertical is not None  # the geoid-less compound path
     if not np.all(np.isfinite(hh)) or np.any(np.abs(hh) > 1e30):
         raise DatumError(
             f"PROJ could not compute {g.vertical.name} heights here (outside its geoid grid?)"
@@ -378,6 +381,7 @@ def _missing_grid_message(g: GridCRS, cands, comp: str) -> str:
     else:
         what = "a geoid grid PROJ does not know of"
         grids = "the geoid grid"
+    assert g.vertical is not None  # called for a compound target only
     return (
         f"{g.vertical.name} ({g.vertical_id}) heights need {what}, which is not installed; "
         "PROJ would silently return the ellipsoidal height as H (a 'ballpark' transformation), "
@@ -424,6 +428,7 @@ def _compound_id(g: GridCRS) -> str:
         return f"{a}+{b.split(':')[1]}"
     from pyproj.crs import CompoundCRS
 
+    assert g.vertical is not None  # called for a compound target only
     return CompoundCRS(f"{g.horizontal.name} + {g.vertical.name}",
                        [g.horizontal, g.vertical]).to_wkt()
 

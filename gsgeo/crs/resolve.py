@@ -221,6 +221,7 @@ def source_crs(text: str = "EPSG:4978") -> SourceCRS:
         comp = (GeographicCRS(datum=crs.datum),
                 GeographicCRS(datum=crs.datum, ellipsoidal_cs=Ellipsoidal3DCS()))
     ell = crs.ellipsoid
+    assert ell is not None  # geographic and geocentric CRSs have one
     a = float(ell.semi_major_metre)
     f = 1.0 / float(ell.inverse_flattening) if ell.inverse_flattening else 0.0
     ids = [crs_id(c, c.to_wkt()) if c.to_authority(min_confidence=100) else c.to_wkt()
