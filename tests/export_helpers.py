@@ -90,7 +90,7 @@ def reference_geojson(data, grid: bool = False) -> dict:
     import json
     import math
 
-    from gsgeo.export.geojson import _header
+    from gsgeo.export.geojson import collection_header
 
     def rows(table):
         cols = []
@@ -133,7 +133,7 @@ def reference_geojson(data, grid: bool = False) -> dict:
                 geom = {"type": "Point", "coordinates": [round(v, 4) for v in cc]}
             feats.append({"type": "Feature", "id": p["point_id"], "geometry": geom,
                           "properties": {"layer": "check_points", **p, **meta}})
-    doc = _header(data, grid)    # the header members and their wording: the writer's own
+    doc = collection_header(data, grid)    # the header members and their wording: the writer's own
     doc["features"] = feats
     return json.loads(json.dumps(doc, allow_nan=False))
 

@@ -492,7 +492,7 @@ def test_failure_while_writing_leaves_nothing(bng, tmp_path, monkeypatch):
     before = good.read_bytes()
     import gsgeo.export.gpkg as gp
 
-    real = gp._write_layer
+    real = gp.write_layer
     calls = []
 
     def boom(*a, **k):
@@ -501,7 +501,7 @@ def test_failure_while_writing_leaves_nothing(bng, tmp_path, monkeypatch):
             raise OSError(28, "No space left on device")
         return real(*a, **k)
 
-    monkeypatch.setattr(gp, "_write_layer", boom)
+    monkeypatch.setattr(gp, "write_layer", boom)
     with pytest.raises(InputError, match="cannot write .*out.gpkg: No space left on device"):
         write_measurements(good, res, lines=s.lines, polygons=s.polygons)
     assert calls == ["points", "rays"]

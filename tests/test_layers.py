@@ -183,9 +183,7 @@ def test_no_private_name_is_used_across_modules():
 #: Private names tests still reach into, in modules of other areas (crs, tiles, export
 #: writers): to be made public there. The list may only shrink.
 KNOWN_PRIVATE_IN_TESTS = {
-    "tests/export_helpers.py: from gsgeo.export.geojson import _header",
     "tests/test_crs_grid.py: tr._transformer",
-    "tests/test_export.py: gp._write_layer",
     "tests/test_tiles_format.py: build_mod._JOB",
     "tests/test_tiles_format.py: build_mod._Job",
     "tests/test_tiles_format.py: build_mod._build_tree",

@@ -135,7 +135,9 @@ def _layers(data: ExportData, grid: bool):
         yield "check_points", data.check_points, "point_id", geoms, meta
 
 
-def _header(data: ExportData, grid: bool) -> dict:
+def collection_header(data: ExportData, grid: bool) -> dict:
+    """The FeatureCollection members before `features`: `type`, and `description` (plus `crs`
+    and `rfc7946: false` for the legacy grid variant)."""
     doc: dict = {"type": "FeatureCollection"}
     if grid:
         doc["crs"] = {"type": "name", "properties": {"name": crs_urn(data.crs)}}
@@ -152,7 +154,7 @@ def _header(data: ExportData, grid: bool) -> dict:
 
 def feature_collection(data: ExportData, *, grid: bool = False) -> dict:
     """The GeoJSON document (a dict) for `data`; grid=True gives the legacy grid variant."""
-    doc = _header(data, grid)
+    doc = collection_header(data, grid)
     features = []
     for layer, table, id_key, geoms, meta in _layers(data, grid):
         features += [orjson.loads(f) for f in _features(layer, table, id_key, geoms, meta, 0,
@@ -168,7 +170,7 @@ def write_geojson(path: Path, data: ExportData, *, grid: bool = False) -> None:
     are encoded at once by orjson (shortest round-trip floats), FEATURE_CHUNK rows at a time
     to bound memory for large exports.
     """
-    head = json.dumps(_header(data, grid), ensure_ascii=False, allow_nan=False,
+    head = json.dumps(collection_header(data, grid), ensure_ascii=False, allow_nan=False,
                       separators=(",", ":")).encode()
     with open(path, "xb") as fh:
         fh.write(head[:-1] + b',"features":[')

@@ -44,8 +44,8 @@ def arrow_write_available() -> bool:
     return tuple(pyogrio.__gdal_version__) >= (3, 8, 0)
 
 
-def _write_layer(path: Path, name: str, geometry: tuple[np.ndarray, np.ndarray], table: Table,
-                 geometry_type: str, crs: str, append: bool, description: str) -> None:
+def write_layer(path: Path, name: str, geometry: tuple[np.ndarray, np.ndarray], table: Table,
+                geometry_type: str, crs: str, append: bool, description: str) -> None:
     """One layer: through pyogrio's Arrow path (GDAL inserts the whole batch in C) where GDAL
     has it, else feature by feature with pyogrio's `write`; the files are the same."""
     from pyogrio.raw import write, write_arrow
@@ -112,7 +112,7 @@ def write_gpkg(path: Path, data: ExportData) -> None:
     try:
         with _no_sqlite_sync():
             for k, (name, geometry, table, gtype, crs, desc) in enumerate(layers):
-                _write_layer(path, name, geometry(), table, gtype, crs, append=k > 0,
+                write_layer(path, name, geometry(), table, gtype, crs, append=k > 0,
                              description=desc)
     except (DataSourceError, DataLayerError, FieldError, GeometryError) as exc:
         raise InputError(f"GDAL could not write the GeoPackage: {exc}") from None
