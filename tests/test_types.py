@@ -24,9 +24,9 @@ CLEAN = [
     "crs/geoid.py", "crs/grid.py", "crs/modelmatrix.py", "crs/resolve.py", "crs/transformers.py",
     "solve/core.py", "solve/intersection.py", "solve/linalg.py", "solve/outliers.py", "solve/simulate.py",
     "solve/stats.py",
-    "tiles/gltf.py", "tiles/lod.py", "tiles/outdir.py", "tiles/placement.py", "tiles/splats.py",
-    "tiles/workers.py",
-    "demo/build.py", "demo/project.py",
+    "tiles/georef.py", "tiles/gltf.py", "tiles/lod.py", "tiles/outdir.py", "tiles/placement.py",
+    "tiles/reader.py", "tiles/splats.py", "tiles/spz.py", "tiles/swap.py", "tiles/workers.py",
+    "demo/build.py", "demo/place.py", "demo/project.py", "demo/scene.py",
 ]
 
 ERROR = re.compile(r"^gsgeo/(?P<path>[^:]+):(?P<line>\d+): error: (?P<message>.*)$", re.M)

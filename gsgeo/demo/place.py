@@ -50,7 +50,9 @@ def local_to_ecef(local: np.ndarray) -> np.ndarray:
     local = np.atleast_2d(np.asarray(local, np.float64))
     grid = parse_crs(CRS)
     inv = transformer(grid, grid.geodetic_crs)
-    to_ecef = transformer(grid.geodetic_crs.to_3d(), "EPSG:4978")
+    geodetic = grid.geodetic_crs
+    assert geodetic is not None  # a projected CRS has one
+    to_ecef = transformer(geodetic.to_3d(), "EPSG:4978")
     lon, lat = inv.transform(local[:, 0] + OFFSET[0], local[:, 1] + OFFSET[1])
     x, y, z = to_ecef.transform(lon, lat, local[:, 2] + OFFSET[2])
     return np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], -1)
@@ -66,6 +68,6 @@ def truth_points() -> list[TruthPoint]:
     out = []
     for i, vp in enumerate(scene.VALIDATION_POINTS):
         out.append(TruthPoint(vp.id, vp.subset, vp.description, vp.xyz,
-                              tuple(float(v) for v in ecef[i]), float(g.easting[i]),
+                              (float(ecef[i, 0]), float(ecef[i, 1]), float(ecef[i, 2])), float(g.easting[i]),
                               float(g.northing[i]), float(g.height[i])))
     return out

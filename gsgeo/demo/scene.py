@@ -77,7 +77,8 @@ class ValidationPoint:
 
 def _unit(v) -> tuple[float, float, float]:
     v = np.asarray(v, float)
-    return tuple(float(x) for x in v / np.linalg.norm(v))
+    x, y, z = (float(c) for c in v / np.linalg.norm(v))
+    return (x, y, z)
 
 
 def _sculpture_frame() -> tuple[np.ndarray, np.ndarray]:
@@ -129,7 +130,7 @@ def _validation_points() -> tuple[ValidationPoint, ...]:
         pts.append(ValidationPoint(f"T{i}", "thin poles", (x, RAIL_Y, RAIL_POST_HEIGHT), "corner",
                                    None, "railing end post top, centre"))
     for i, c in enumerate(sculpture_corners(), 1):
-        pts.append(ValidationPoint(f"S{i}", "low corners", tuple(float(v) for v in c), "corner",
+        pts.append(ValidationPoint(f"S{i}", "low corners", (float(c[0]), float(c[1]), float(c[2])), "corner",
                                    None, f"sculpture top corner, {c[2]:.2f} m above ground"))
     return tuple(pts)
 

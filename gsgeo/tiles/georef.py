@@ -199,6 +199,7 @@ class Georeference:
     def describe(self) -> str:
         ax = {"z-up": "Z-up (ENU)", "y-up": "Y-up", "y-down": "Y-down (COLMAP)"}[self.axes]
         if self.kind in ("origin", "none"):
+            assert self.origin is not None  # set for these kinds
             lat, lon, h = self.origin
             d = (f"local ENU at lat {lat:.8f}, lon {lon:.8f}, h {h:.3f} m"
                  + (f", heading {self.heading:g} deg" if self.heading else ""))
@@ -221,6 +222,7 @@ class Georeference:
             m = np.asarray(self.matrix, np.float64)
             r, s = _similarity(m[:3, :3] @ ax.T, "--transform")
             return m[:3, :3] @ ax.T, m[:3, 3], s
+        assert self.origin is not None  # set for every kind but "transform"
         lat, lon, h = self.origin
         r = enu_rotation(lon, lat).T @ rot_z(-self.heading) @ ax
         t = geodetic_to_ecef_closed_form(lon, lat, h)

@@ -41,7 +41,7 @@ class Splats:
     def sh_degree(self) -> int:
         return SH_DEGREE_OF[int(self.sh.shape[1])]
 
-    def take(self, idx: np.ndarray) -> Splats:
+    def take(self, idx: np.ndarray | slice) -> Splats:
         return Splats(self.positions[idx], self.scales[idx], self.rotations[idx],
                       self.opacities[idx], self.colors[idx], self.sh[idx])
 

@@ -17,17 +17,19 @@ import functools
 import gzip
 import struct
 import zlib
-
-try:  # ISA-L's deflate is 5-6x faster than zlib at levels 0-3 with the same gzip output format
-    from isal import isal_zlib as _isal
-except ImportError:  # pragma: no cover - isal is a declared dependency
-    _isal = None
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 
 from gsgeo.errors import InputError
 from gsgeo.tiles.splats import SH_COEFFS, SH_DEGREE_OF, Splats
+
+_isal: ModuleType | None
+try:  # ISA-L's deflate is 5-6x faster than zlib at levels 0-3 with the same gzip output format
+    from isal import isal_zlib as _isal
+except ImportError:  # pragma: no cover - isal is a declared dependency
+    _isal = None
 
 MAGIC = 0x5053474E
 COLOR_SCALE = 0.15

@@ -98,7 +98,7 @@ def is_stale(name: str) -> bool:
 def clean_stale(folder: Path) -> list[Path]:
     """Remove our temporaries in ``folder`` whose owning process is gone; returns them.
     Anything else (other tools' files, live builds' temporaries) is left alone."""
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(os.scandir(folder))
     except OSError:

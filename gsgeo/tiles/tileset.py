@@ -25,6 +25,7 @@ reading a tileset does not load PROJ.
 from __future__ import annotations
 
 import json
+import os
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -186,7 +187,7 @@ class Tileset:
     """A tileset.json with every tile's computed transform (3D Tiles 1.0 and 1.1), external
     tilesets followed."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | os.PathLike[str]) -> None:
         p = Path(path)
         if p.is_dir():
             p = p / "tileset.json"
