@@ -24,7 +24,8 @@ CLEAN = [
     "crs/geoid.py", "crs/grid.py", "crs/modelmatrix.py", "crs/resolve.py", "crs/transformers.py",
     "solve/core.py", "solve/intersection.py", "solve/linalg.py", "solve/outliers.py", "solve/simulate.py",
     "solve/stats.py",
-    "tiles/georef.py", "tiles/gltf.py", "tiles/lod.py", "tiles/outdir.py", "tiles/placement.py",
+    "tiles/georef.py", "tiles/gltf.py", "tiles/gridplacement.py", "tiles/lod.py", "tiles/outdir.py",
+    "tiles/placement.py",
     "tiles/reader.py", "tiles/splats.py", "tiles/spz.py", "tiles/swap.py", "tiles/workers.py",
     "demo/build.py", "demo/place.py", "demo/project.py", "demo/scene.py",
 ]

@@ -156,7 +156,7 @@ def _is_conversion(t: Transformer) -> bool:
     return "inverse of" not in desc and " to " not in desc
 
 
-def choose(src: str, dst: str, lon: float, lat: float) -> tuple[Transformer, bool]:
+def choose(src: object, dst: object, lon: float, lat: float) -> tuple[Transformer, bool]:
     """The best available operation whose area of use contains (lon, lat).
 
     Returns (transformer, inside_area). When no candidate covers the point, the best overall

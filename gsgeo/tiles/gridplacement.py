@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
+from pyproj import Transformer
 from pyproj.exceptions import CRSError as PyprojCRSError
 from pyproj.exceptions import ProjError
 
@@ -28,7 +29,9 @@ class GridPlacement(Placement):
         self.g = georef
         c = parse_crs(georef.crs)
         self.horiz = c.sub_crs_list[0] if c.is_compound else c
-        self.geog = self.horiz.geodetic_crs
+        geog = self.horiz.geodetic_crs
+        assert geog is not None  # a projected or geographic CRS has one
+        self.geog = geog
         try:
             self.inv = transformer(self.horiz, self.geog)
             # The same explicit operation the measurements take back to the grid
@@ -40,7 +43,7 @@ class GridPlacement(Placement):
             self.proj = projection(self.horiz)
         except (ProjError, PyprojCRSError) as exc:
             raise CRSError(f"cannot build the transformation from {georef.crs}: {exc}") from None
-        self.vert = None
+        self.vert: Transformer | None = None
         if georef.height == "vertical":
             comp = parse_crs(
                 {"$schema": "https://proj.org/schemas/v0.7/projjson.schema.json",
@@ -59,6 +62,7 @@ class GridPlacement(Placement):
                     f"heights in {georef.vertical_crs} need a geoid grid that is not "
                     f"installed ({why}); pass --geoid FILE.tif or --height ellipsoidal") from None
         elif georef.height == "geoid":
+            assert georef.geoid is not None  # the georeference checks the geoid file exists
             path = os.path.abspath(georef.geoid)
             try:
                 self.vert = pipeline(
@@ -92,8 +96,10 @@ class GridPlacement(Placement):
         lon, lat = self.inv.transform(e, n, errcheck=False)
         lon, lat = np.asarray(lon, float), np.asarray(lat, float)
         if self.g.height == "vertical":
+            assert self.vert is not None
             _, _, h = self.vert.transform(e, n, hh, errcheck=False)
         elif self.g.height == "geoid":
+            assert self.vert is not None
             _, _, h = self.vert.transform(lon, lat, hh, errcheck=False)
         else:
             h = hh
