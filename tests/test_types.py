@@ -27,7 +27,7 @@ CLEAN = [
     "tiles/georef.py", "tiles/gltf.py", "tiles/gridplacement.py", "tiles/lod.py", "tiles/outdir.py",
     "tiles/placement.py",
     "tiles/reader.py", "tiles/splats.py", "tiles/spz.py", "tiles/swap.py", "tiles/workers.py",
-    "demo/build.py", "demo/place.py", "demo/project.py", "demo/scene.py",
+    "demo/build.py", "demo/place.py", "demo/project.py", "demo/scene.py", "demo/splats.py",
 ]
 
 ERROR = re.compile(r"^gsgeo/(?P<path>[^:]+):(?P<line>\d+): error: (?P<message>.*)$", re.M)

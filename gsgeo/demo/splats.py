@@ -165,9 +165,9 @@ def _building(rng: np.random.Generator) -> Part:
     for sgn in (1.0, -1.0):   # south slope rises towards +y, north towards -y
         u, v = _grid(0, x1 - x0, 0, slope_len, st)
         f = v / slope_len
-        y = (y0 + f * (ry - y0)) if sgn > 0 else (y1 - f * (y1 - ry))
+        ys = (y0 + f * (ry - y0)) if sgn > 0 else (y1 - f * (y1 - ry))
         z = ez + f * (rz - ez)
-        pts = np.stack([x0 + u, y, z], -1)
+        pts = np.stack([x0 + u, ys, z], -1)
         up_slope = np.array([0.0, sgn * (ry - y0), rz - ez]) / slope_len
         t1 = [1.0, 0, 0] if sgn > 0 else [-1.0, 0, 0]
         row = np.floor(v / 0.25)
@@ -191,8 +191,8 @@ def _cylinder(a, b, radius: float, around: int, step: float, rgb, rng: np.random
     n_ax = max(2, int(round(length / step)))
     s = (np.arange(n_ax) + 0.5) / n_ax * length
     phi = np.arange(around) * 2 * np.pi / around
-    ss, pp = np.meshgrid(s, phi + np.pi / around, indexing="ij")
-    ss, pp = ss.ravel(), pp.ravel()
+    ss_grid, pp_grid = np.meshgrid(s, phi + np.pi / around, indexing="ij")
+    ss, pp = ss_grid.ravel(), pp_grid.ravel()
     radial = np.cos(pp)[:, None] * e1 + np.sin(pp)[:, None] * e2
     pts = a + ss[:, None] * w + radius * radial
     tang = np.cross(w, radial)
@@ -240,7 +240,7 @@ def _sculpture(rng: np.random.Generator) -> Part:
         """Samples of the parallelogram p00 + s (p10 - p00) + t (p01 - p00)."""
         e1, e2 = p10 - p00, p01 - p00
         l1, l2 = np.linalg.norm(e1), np.linalg.norm(e2)
-        s, t = _grid(0, 1, 0, 1, st / max(l1, l2))
+        s, t = _grid(0, 1, 0, 1, st / float(max(l1, l2)))
         pts = p00 + s[:, None] * e1 + t[:, None] * e2
         return pts, e1 / l1, e2 / l2
 
