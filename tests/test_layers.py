@@ -180,16 +180,8 @@ def test_no_private_name_is_used_across_modules():
     assert private_uses("gsgeo") == []
 
 
-#: Private names tests still reach into, in modules of other areas (crs, tiles, export
-#: writers): to be made public there. The list may only shrink.
-KNOWN_PRIVATE_IN_TESTS = {
-    "tests/test_crs_grid.py: tr._transformer",
-    "tests/test_tiles_format.py: build_mod._JOB",
-    "tests/test_tiles_format.py: build_mod._Job",
-    "tests/test_tiles_format.py: build_mod._build_tree",
-    "tests/test_tiles_math.py: from gsgeo.tiles.splats import _sh_basis",
-    "tests/test_tiles_spz.py: spz._quantize_sh",
-}
+#: Private names tests may reach into: none (tests use the public API).
+KNOWN_PRIVATE_IN_TESTS: set[str] = set()
 
 
 def test_tests_use_no_new_private_name_of_gsgeo():

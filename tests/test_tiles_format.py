@@ -318,21 +318,21 @@ def test_tree_grown_by_worker_processes_equals_the_serial_tree():
         shared, order = fresh(), shared_empty(n, np.int32)
         second = lod.TreeInput(shared_empty((3, n), np.float32), shared_empty(n, np.float32),
                                shared_empty(n, np.float32), shared_empty(n, np.int32))
-        build_mod._JOB = build_mod._Job(None, None, None, shared, 3, 3, 1, second, order)
+        build_mod.WORKER_JOB = build_mod.WorkerJob(None, None, None, shared, 3, 3, 1, second, order)
         try:
             with pool(2) as imap:
-                par[nproc], t = build_mod._build_tree(shared, imap, nproc, 1000, None, second,
+                par[nproc], t = build_mod.build_tree(shared, imap, nproc, 1000, None, second,
                                                       order)
         finally:
-            build_mod._JOB = None
+            build_mod.WORKER_JOB = None
         assert t == 1
     shared = fresh()         # the root split here, in place
-    build_mod._JOB = build_mod._Job(None, None, None, shared, 3, 3, 1)
+    build_mod.WORKER_JOB = build_mod.WorkerJob(None, None, None, shared, 3, 3, 1)
     try:
         with pool(2) as imap:
-            par_top, t = build_mod._build_tree(shared, imap, 2, 1000, None)
+            par_top, t = build_mod.build_tree(shared, imap, 2, 1000, None)
     finally:
-        build_mod._JOB = None
+        build_mod.WORKER_JOB = None
     assert t == 0
 
     def nodes(root):

@@ -42,9 +42,9 @@ def test_sh_rotation_turns_the_view_dependent_colour(rng):
 
 def test_sh_basis_is_orthonormal_on_the_sphere(rng):
     """Monte Carlo: the INRIA constants make the real SH orthonormal (so D is orthogonal)."""
-    from gsgeo.tiles.splats import _sh_basis
+    from gsgeo.tiles.splats import sh_basis
     d = rng.normal(size=(400_000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    b = _sh_basis(d)
+    b = sh_basis(d)
     gram = 4 * np.pi * (b.T @ b) / d.shape[0]
     assert np.allclose(gram, np.eye(15), atol=0.03)

@@ -119,8 +119,8 @@ def test_sh_bytes_equal_the_bucket_formula_in_both_layouts(rng, k):
     bucket = np.array([8] * 3 + [16] * 12)[:k, None]
     idx = np.floor(sh.astype(np.float64) * 128 / bucket + 128 / bucket + 0.5)
     want = (np.clip(idx, 0, 256 / bucket - 1) * bucket).astype(np.uint8).reshape(n, 3 * k)
-    np.testing.assert_array_equal(spz._quantize_sh(sh), want)
-    np.testing.assert_array_equal(spz._quantize_sh(np.ascontiguousarray(sh)), want)
+    np.testing.assert_array_equal(spz.quantize_sh(sh), want)
+    np.testing.assert_array_equal(spz.quantize_sh(np.ascontiguousarray(sh)), want)
 
 
 def test_fractional_bits_shrink_for_large_extents(rng):

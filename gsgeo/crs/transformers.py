@@ -44,6 +44,7 @@ def crs_key(crs: object) -> str:
 @functools.lru_cache(maxsize=128)
 def _transformer(src: str, dst: str, allow_ballpark: bool, datadir: str) -> Transformer:
     network_off()
+    BUILDS["transformers"] += 1
     return Transformer.from_crs(parse_crs(src), parse_crs(dst), always_xy=True,
                                 allow_ballpark=allow_ballpark)
 
@@ -92,7 +93,8 @@ warnings.filterwarnings("ignore", message="Best transformation is not available"
                         category=UserWarning)
 
 _local = threading.local()
-#: How many TransformerGroups were built (tests check that points reuse them).
+#: How many Transformers ("transformers") and TransformerGroups ("groups") were built (tests
+#: check that points reuse them).
 BUILDS: Counter = Counter()
 
 

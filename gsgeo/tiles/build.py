@@ -188,7 +188,7 @@ def write_tileset_json(path: Path, root: lod.Node, root_transform: np.ndarray,
 
 
 @dataclass
-class _Job:
+class WorkerJob:
     """What forked workers read (set before the pool forks; see gsgeo.tiles.workers)."""
     source: Source
     placement: Placement
@@ -206,8 +206,8 @@ class _Job:
         return self.tree2 if t else self.tree
 
 
-_JOB: _Job | None = None
-#: One build at a time per process: the workers' state is the module-level _JOB.
+WORKER_JOB: WorkerJob | None = None
+#: One build at a time per process: the workers' state is the module-level WORKER_JOB.
 _BUILD_LOCK = threading.Lock()
 
 
@@ -222,7 +222,7 @@ def _quantise_block(start: int, stop: int) -> tuple[int, int, float]:
     """Read splats [start, stop), drop non-finite ones, turn them into the root frame and
     quantise them into held rows [start, start + kept), with the tree's inputs. Returns
     (start, kept, largest |coordinate| in metres)."""
-    job = _JOB
+    job = WORKER_JOB
     s, ok = job.source.read_finite(start, stop)
     if not ok.all():
         s = s.take(ok)
@@ -248,7 +248,7 @@ def _finish_root_half(task: tuple) -> list[tuple]:
     of the rest. With ``grow`` (max_splats, parent_splats), the parts become the root's
     children from number ``first`` on, grown to the leaves here (``node``; else None)."""
     keep, lo, hi, axes, n, first, grow = task
-    job = _JOB
+    job = WORKER_JOB
     src, dst = job.tree, job.tree2
     idx = job.order[keep + lo:keep + hi]
     parts = lod.split_parts(src.pos[:, :n], idx, axes)
@@ -270,14 +270,14 @@ def _finish_root_half(task: tuple) -> list[tuple]:
 def _grow_subtree(task: tuple[int, lod.Node, int, int, int, int]) -> lod.Node:
     """Grow the subtree of a node over the range [a, b) of tree columns t in place."""
     t, node, a, b, max_splats, parent_splats = task
-    return lod.grow(_JOB.trees(t), node, a, b, max_splats, parent_splats)
+    return lod.grow(WORKER_JOB.trees(t), node, a, b, max_splats, parent_splats)
 
 
 def _write_tile(task: tuple[int, str, int, int, int, str]) -> int:
     """Pack, compress and write one tile (its splats: held rows perm[start:stop] of tree
     columns t, sorted, so the gather is near-sequential); returns its number of splats."""
     t, name, start, stop, frac, folder = task
-    job = _JOB
+    job = WORKER_JOB
     rows = job.trees(t).perm[start:stop]
     blob, lo, hi = spz.pack_bounded(job.held, job.sh_degree, version=job.spz_version,
                                     fractional_bits=frac, level=job.level, rows=rows)
@@ -287,7 +287,7 @@ def _write_tile(task: tuple[int, str, int, int, int, str]) -> int:
     return int(rows.shape[0])
 
 
-def _build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,
+def build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,
                 parent_splats: int | None, tree2: lod.TreeInput | None = None,
                 order: np.ndarray | None = None) -> tuple[lod.Node, int]:
     """The tile tree and which tree columns hold it (0: ``tree``, 1: ``tree2``).
@@ -382,7 +382,7 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
 
 def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version, level,
            workers, overwrite, progress, block, on_start) -> Summary:
-    global _JOB
+    global WORKER_JOB
     t0 = time.monotonic()
     src_path = Path(input_path)
     out = Path(outdir)
@@ -418,7 +418,7 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
         tree2 = order = None
         if nproc > 1 and count > max_splats:     # the root is split by the workers
             tree2, order = _shared_tree(count), shared_empty(count, np.int32)
-        _JOB = _Job(src, placement, held, tree, spz_version, sh_degree, level, tree2, order)
+        WORKER_JOB = WorkerJob(src, placement, held, tree, spz_version, sh_degree, level, tree2, order)
         with pool(nproc) as imap:
             bar = Progress(progress, count, "reading")
             kept: list[tuple[int, int]] = []
@@ -450,7 +450,7 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
                 georef.warnings.append(
                     f"the scene reaches {extent:.0f} m from its centre: SPZ positions use "
                     f"{frac} fractional bits ({1000 / 2 ** frac:.2f} mm steps) instead of 12")
-            root, t = _build_tree(tree, imap, nproc, max_splats, parent_splats, tree2, order)
+            root, t = build_tree(tree, imap, nproc, max_splats, parent_splats, tree2, order)
             nodes = [nd for nd in root.walk() if nd.index.shape[0]]
             (tmp / "tiles").mkdir()
             bar = Progress(progress, n, "writing")
@@ -487,7 +487,7 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     finally:
-        _JOB = None
+        WORKER_JOB = None
     summary.seconds = time.monotonic() - t0
     return summary
 

@@ -144,7 +144,7 @@ def rotation_angle(m: np.ndarray) -> float:
 
 # --- spherical harmonics ---------------------------------------------------------------------
 
-def _sh_basis(d: np.ndarray) -> np.ndarray:
+def sh_basis(d: np.ndarray) -> np.ndarray:
     """The 15 real SH functions of degree 1..3 at unit directions (M, 3), with the constants
     and signs of the INRIA 3DGS renderer (its eval_sh), so coefficients mean the same here."""
     x, y, z = d[:, 0], d[:, 1], d[:, 2]
@@ -176,8 +176,8 @@ def sh_rotation(r: np.ndarray, k: int = 15) -> np.ndarray:
     rng = np.random.default_rng(0)
     d = rng.normal(size=(256, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    b_new = _sh_basis(d)[:, :k]
-    b_old = _sh_basis(d @ np.asarray(r, dtype=np.float64))[:, :k]  # rows: rᵀ d
+    b_new = sh_basis(d)[:, :k]
+    b_old = sh_basis(d @ np.asarray(r, dtype=np.float64))[:, :k]  # rows: rᵀ d
     out = np.zeros((k, k))
     for lo, hi in ((0, 3), (3, 8), (8, 15)):
         if lo >= k:
@@ -188,5 +188,5 @@ def sh_rotation(r: np.ndarray, k: int = 15) -> np.ndarray:
 
 def sh_eval(sh: np.ndarray, d: np.ndarray) -> np.ndarray:
     """View-dependent colour term sum_j B_j(d) c_j of degree 1..3 at unit directions: (N, 3)."""
-    b = _sh_basis(d)[:, : sh.shape[1]]
+    b = sh_basis(d)[:, : sh.shape[1]]
     return np.einsum("nk,nkc->nc", b, sh)

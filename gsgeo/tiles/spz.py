@@ -103,7 +103,7 @@ def _sh_constants(k: int, channel_major: bool) -> tuple[np.ndarray, np.ndarray]:
     return add, mask
 
 
-def _quantize_sh(sh: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def quantize_sh(sh: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """SH floats (N, K, 3) to bytes (N, K*3): x·128 + 128 to the nearest multiple of the
     coefficient's bucket (the reference encoder's precision), at most 256 - bucket. (The
     reference encoder rounds twice and clamps to 255; both decode within half a bucket.)
@@ -238,14 +238,14 @@ def quantize(s: Splats, version: int = 3, out: SpzBytes | None = None) -> SpzByt
             colors=_u8(s.colors * (COLOR_SCALE * 255.0) + 127.5),
             scales=_u8((s.scales + 10.0) * 16.0),
             rotations=rot,
-            sh=_quantize_sh(s.sh),
+            sh=quantize_sh(s.sh),
         )
     out.positions[:] = s.positions
     _u8(alpha * 255.0, out.alphas)
     _u8(s.colors * (COLOR_SCALE * 255.0) + 127.5, out.colors)
     _u8((s.scales + 10.0) * 16.0, out.scales)
     out.rotations[:] = rot
-    _quantize_sh(s.sh, out.sh)
+    quantize_sh(s.sh, out.sh)
     return out
 
 
