@@ -100,7 +100,7 @@ def direction_problem(direction: Any) -> str | None:
     return None
 
 
-def id_text(value: Any, field: str) -> str:
+def id_text(value: Any, field: str | None) -> str:
     """An id (point, line, polygon, check point) as given, or InputError.
 
     Text or an integer; never empty or blank, never holding a control character, a line or

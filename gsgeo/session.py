@@ -187,7 +187,7 @@ def _text(value: Any, field: str | None, default: str = "") -> str:
     return str(value)
 
 
-def _ray_members(doc: Any, field: str) -> Ray:
+def _ray_members(doc: Any, field: str | None) -> Ray:
     """The JSON shape of one ray object (numbers, lengths, members); ranges are the typed
     core's (gsgeo.measure.Rays)."""
     if not isinstance(doc, dict):

@@ -351,8 +351,8 @@ def polygon_measures_many(xyz: Sequence[np.ndarray], cov: Sequence[np.ndarray], 
     """`polygon_measures` of many polygons: (measures, ok). Rings given once each (not closed)."""
     k_all = len(xyz)
     sizes = np.fromiter(map(len, xyz), dtype=np.int64, count=k_all)
-    out = PolygonArrays(sizes.copy(), *(np.full(k_all, np.nan) for _ in range(4)),
-                        np.zeros(k_all, dtype=bool))
+    out = PolygonArrays(sizes.copy(), np.full(k_all, np.nan), np.full(k_all, np.nan),
+                        np.full(k_all, np.nan), np.full(k_all, np.nan), np.zeros(k_all, dtype=bool))
     ok = np.zeros(k_all, dtype=bool)
     for n, sel in _groups(sizes):
         if n < 3:

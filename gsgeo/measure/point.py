@@ -136,7 +136,8 @@ def measure_point(
             origins_grid = None  # e.g. a camera outside the geoid grid; the point is fine
     else:
         t84 = transformer(src.id, "EPSG:4979")
-        lon, lat, h84 = (float(v) for v in t84.transform(*point_ecef, errcheck=False))
+        x, y, z = t84.transform(point_ecef[0], point_ecef[1], point_ecef[2], errcheck=False)
+        lon, lat, h84 = float(x), float(y), float(z)
 
     return Measurement(
         point_id=point_id,

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gsgeo import limits
 from gsgeo.errors import InputError
@@ -26,7 +27,7 @@ from gsgeo.errors import InputError
 RAY_KEYS = ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")
 
 
-def _optional_rows(values: Sequence[Sequence[float] | None] | np.ndarray | None, n: int,
+def _optional_rows(values: Sequence[ArrayLike | None] | np.ndarray | None, n: int,
                    width: int) -> np.ndarray | None:
     """(n, width) float array, NaN rows where a value is absent; None when none is given."""
     if values is None:
@@ -107,11 +108,11 @@ class Rays:
             object.__setattr__(self, name, value)
 
     @classmethod
-    def from_columns(cls, origins: Sequence[Sequence[float]], directions: Sequence[Sequence[float]],
+    def from_columns(cls, origins: Sequence[ArrayLike], directions: Sequence[ArrayLike],
                      ifov: Sequence[float | None] | None = None,
-                     pixels: Sequence[Sequence[float] | None] | None = None,
-                     viewports: Sequence[Sequence[float] | None] | None = None,
-                     model_matrices: Sequence[Sequence[float] | None] | None = None) -> Rays:
+                     pixels: Sequence[ArrayLike | None] | None = None,
+                     viewports: Sequence[ArrayLike | None] | None = None,
+                     model_matrices: Sequence[ArrayLike | None] | None = None) -> Rays:
         """Rays from per-ray values as JSON gives them (None where a ray has no such member);
         model matrices as 16 numbers in column-major order (3D Tiles, CesiumJS)."""
         n = len(origins)

@@ -70,17 +70,19 @@ class Measurement:
                    lon=self.lon, lat=self.lat, h_wgs84=self.h_wgs84,
                    measured_at=self.measured_at)
         if g is not None:
-            c = g.covariance
             rec.update(
                 easting=g.easting, northing=g.northing, height=g.height,
                 height_type=g.height_type, vertical_datum=g.vertical_datum, crs=g.crs,
                 sigma_e=g.sigma_e, sigma_n=g.sigma_n, sigma_h=g.sigma_h,
-                cov_ee=float(c[0, 0]), cov_en=float(c[0, 1]), cov_eh=float(c[0, 2]),
-                cov_nn=float(c[1, 1]), cov_nh=float(c[1, 2]), cov_hh=float(c[2, 2]),
                 ellipse_major_95=g.ellipse_major_95, ellipse_minor_95=g.ellipse_minor_95,
                 ellipse_bearing_deg=g.ellipse_bearing_deg, operation=g.operation,
                 operation_accuracy_m=g.operation_accuracy_m,
             )
+            c = g.covariance  # a measured point's grid point always carries one
+            if c is not None:
+                rec.update(
+                    cov_ee=float(c[0, 0]), cov_en=float(c[0, 1]), cov_eh=float(c[0, 2]),
+                    cov_nn=float(c[1, 1]), cov_nh=float(c[1, 2]), cov_hh=float(c[2, 2]))
         return rec
 
     def to_dict(self) -> dict[str, Any]:

@@ -18,8 +18,9 @@ import csv
 import io
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, overload
 
 import orjson
 
@@ -51,6 +52,14 @@ def format_from_name(filename: str | None) -> str | None:
             "gpkg": "gpkg"}.get(suffix)
 
 
+@overload
+def _num(value: Any, field: str, optional: Literal[False] = False) -> float: ...
+
+
+@overload
+def _num(value: Any, field: str, optional: bool) -> float | None: ...
+
+
 def _num(value: Any, field: str, optional: bool = False) -> float | None:
     """A coordinate of a check-point file; ``field`` is where it is in the file (line and
     column of a CSV, JSON path of a GeoJSON)."""
@@ -63,7 +72,7 @@ def _num(value: Any, field: str, optional: bool = False) -> float | None:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise InputError(f"expected a number, got {value[:30]!r}", field=field) from None
+        raise InputError(f"expected a number, got {str(value)[:30]!r}", field=field) from None
     except OverflowError:
         raise InputError("the number is too large", field=field) from None
     if not math.isfinite(v):
@@ -73,7 +82,7 @@ def _num(value: Any, field: str, optional: bool = False) -> float | None:
     return v
 
 
-def _pick(columns: list[str], names: tuple[str, ...]) -> str | None:
+def _pick(columns: Sequence[str], names: tuple[str, ...]) -> str | None:
     lower = {c.strip().lower(): c for c in columns}
     for n in names:
         if n in lower:

@@ -56,6 +56,10 @@ class SQLiteTransaction(Transaction):
     def _one(self, sql: str, args: tuple = ()) -> sqlite3.Row | None:
         return self.con.execute(sql, args).fetchone()
 
+    def _next_seq(self, sql: str, args: tuple) -> int:
+        # COALESCE(MAX(seq), 0) + 1: an aggregate answers exactly one row, even on no rows
+        return int(self.con.execute(sql, args).fetchone()[0])
+
     def _all(self, sql: str, args: tuple = ()) -> list[sqlite3.Row]:
         return self.con.execute(sql, args).fetchall()
 
@@ -129,8 +133,8 @@ class SQLiteTransaction(Transaction):
 
     def insert_point(self, p: PointRecord) -> None:
         p.created_at = p.updated_at = now_iso()
-        p.seq = self._one("SELECT COALESCE(MAX(seq), 0) + 1 FROM points WHERE project_id = ?",
-                          (p.project_id,))[0]
+        p.seq = self._next_seq("SELECT COALESCE(MAX(seq), 0) + 1 FROM points WHERE project_id = ?",
+                               (p.project_id,))
         self._insert(
             "INSERT INTO points (project_id, id, seq, code, description, rays, excluded, result,"
             " error, solved_rev, created_at, updated_at)"
@@ -182,8 +186,8 @@ class SQLiteTransaction(Transaction):
 
     def insert_feature(self, f: FeatureRecord) -> None:
         f.created_at = f.updated_at = now_iso()
-        f.seq = self._one("SELECT COALESCE(MAX(seq), 0) + 1 FROM features WHERE project_id = ?"
-                          " AND kind = ?", (f.project_id, f.kind))[0]
+        f.seq = self._next_seq("SELECT COALESCE(MAX(seq), 0) + 1 FROM features WHERE project_id = ?"
+                               " AND kind = ?", (f.project_id, f.kind))
         self._insert(
             "INSERT INTO features (project_id, kind, id, seq, point_ids, code, description,"
             " created_at, updated_at) VALUES (?,?,?,?,?,?,?,?,?)",
