@@ -35,7 +35,7 @@ def _text(name: str, col: Any) -> Any:
     """UTF-8 large_string array of an object column of str / None."""
     vals = np.asarray(col, dtype=object)
     n = vals.shape[0]
-    null = np.equal(vals, None)
+    null = np.equal(vals, np.array(None, dtype=object))
     if null.any():
         vals = vals.copy()
         vals[null] = ""

@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import orjson
@@ -125,7 +126,7 @@ def _layers(data: ExportData, grid: bool):
         yield "polygons", data.polygons, "polygon_id", geoms, meta
     if data.check_points is not None:
         geoms = []
-        for c in data.check_xyz:
+        for c in cast(np.ndarray, data.check_xyz):  # set with check_points
             if not grid:
                 geoms.append(b"null")
                 continue

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import warnings
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import shapely
@@ -84,8 +85,10 @@ def write_gpkg(path: Path, data: ExportData) -> None:
     layers = [("points", lambda: wkb.points(data.point_xyz), data.points, "Point Z", data.crs,
                f"gsgeo measured points; {unit}; sigmas 1 sigma (m), covariances m^2, "
                "ellipses 95 % (m, bearing from grid north)")]
+    # collect sets each layer's geometry array together with its table
     if data.rays is not None:
-        layers.append(("rays", lambda: wkb.linestrings(data.ray_xyz), data.rays, "LineString Z",
+        ray_xyz = cast(np.ndarray, data.ray_xyz)
+        layers.append(("rays", lambda: wkb.linestrings(ray_xyz), data.rays, "LineString Z",
                        data.crs, "gsgeo rays: camera centre to the measured point; residuals "
                        "in pixels and metres; ray_index 0-based"))
     if data.lines is not None:
@@ -99,13 +102,15 @@ def write_gpkg(path: Path, data: ExportData) -> None:
             data.polygons, "Polygon Z", data.crs, "gsgeo polygons of measured points; grid "
             "area (m^2) and perimeter (m) with 1 sigma"))
     if data.ellipses is not None:
-        layers.append(("error_ellipses", lambda: wkb.polygons(data.ellipse_xy), data.ellipses,
+        ellipse_xy = cast(np.ndarray, data.ellipse_xy)
+        layers.append(("error_ellipses", lambda: wkb.polygons(ellipse_xy), data.ellipses,
                        "Polygon", data.horizontal_crs,
                        "gsgeo 95 % horizontal error ellipses of the points (true size)"))
     if data.check_points is not None:
-        z3 = bool(np.all(np.isfinite(data.check_xyz[:, 2])))
+        check_xyz = cast(np.ndarray, data.check_xyz)
+        z3 = bool(np.all(np.isfinite(check_xyz[:, 2])))
         layers.append(("check_points",
-                       lambda: wkb.points(data.check_xyz if z3 else data.check_xyz[:, :2]),
+                       lambda: wkb.points(check_xyz if z3 else check_xyz[:, :2]),
                        data.check_points, "Point Z" if z3 else "Point",
                        data.crs if z3 else data.horizontal_crs,
                        "check points (ground truth); d_* = measured - check"))

@@ -24,6 +24,8 @@ import numpy as np
 from gsgeo.crs.resolve import grid_crs, parse_crs
 from gsgeo.errors import CRSError, GeometryError, GsgeoError, InputError
 from gsgeo.measure.features import (
+    LineArrays,
+    PolygonArrays,
     line_measures,
     line_measures_many,
     polygon_measures,
@@ -90,7 +92,7 @@ def _is_failure(m: Any) -> bool:
     return type(m).__name__ == "MeasurementFailure"
 
 
-def _record(m: Any) -> dict:
+def _record(m: Any) -> Mapping[str, Any]:
     if isinstance(m, Mapping):
         missing = [k for k in RECORD_KEYS if k not in m]
         if missing:
@@ -195,6 +197,7 @@ def _column(values: list, kind: str, name: str, as_text: bool = True) -> np.ndar
 
 def _rays(m: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray] | None:
     """Camera centres in the grid (N, 3), residuals px / m, outlier, excluded flags; None if absent."""
+    org: np.ndarray | None
     if isinstance(m, Mapping):
         rays = m.get("rays") or []
         if not rays or any(r.get("origin_grid") is None for r in rays):
@@ -312,7 +315,10 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
     index = dict(zip(ids, range(len(ids)), strict=True))
     if len(index) != len(ids):
         seen: set[str] = set()
-        dup = next(p for p in ids if p in seen or seen.add(p))
+        for dup in ids:  # the first id that comes a second time
+            if dup in seen:
+                break
+            seen.add(dup)
         raise InputError(f"duplicate point id '{dup}' in the measurements")
     try:
         g = grid_crs(first["crs"])
@@ -417,14 +423,17 @@ def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str
         if fast is None:
             return
         have, counts, org, px, rm, out, exc = fast
-        parts = [(0, (None, px, rm, out, exc))]
+        # (owner, (origins, px, m, outlier, excluded)); origins are only read from _rays' parts
+        parts: Sequence[tuple[int, tuple[np.ndarray | None, Any, Any, Any, Any]]] = \
+            [(0, (None, px, rm, out, exc))]
     else:
-        parts = [(i, r) for i, m in enumerate(solved) if (r := _rays(m)) is not None]
-        if not parts:
+        found = [(i, r) for i, m in enumerate(solved) if (r := _rays(m)) is not None]
+        if not found:
             return
-        have = np.array([i for i, _ in parts])
-        counts = np.array([r[0].shape[0] for _, r in parts])
-        org = np.concatenate([r[0] for _, r in parts])
+        parts = found
+        have = np.array([i for i, _ in found])
+        counts = np.array([r[0].shape[0] for _, r in found])
+        org = np.concatenate([r[0] for _, r in found])
     owner = np.repeat(have, counts)
     seg = np.stack([org, xyz[owner]], axis=1)
     pid = np.array(ids, dtype=object)[owner]
@@ -472,9 +481,12 @@ def _parse_features(items: Iterable[Any], kind: str, index, failed) -> tuple[lis
     return rows, None
 
 
-def _measure_features(kind: str, rows: list, xyz, cov, unit: float, vunit: float):
-    """Measures of all rows at once; a row the batch flags goes through the single-feature
-    function, which raises its error (prefixed with the feature's id) or gives its values."""
+def _measure_features(kind: str, rows: list, xyz: np.ndarray, cov: np.ndarray, unit: float,
+                      vunit: float) -> Any:
+    """Measures of all rows at once (LineArrays for lines, PolygonArrays for polygons); a row
+    the batch flags goes through the single-feature function, which raises its error
+    (prefixed with the feature's id) or gives its values."""
+    out: LineArrays | PolygonArrays
     pts = [xyz[r[2]] for r in rows]
     covs = [cov[r[2]] for r in rows]
     if kind == "line":

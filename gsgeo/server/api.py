@@ -57,6 +57,13 @@ EXPORT_TYPES = {"gpkg": "application/geopackage+sqlite3", "geojson": "applicatio
                 "geojson-grid": "application/json", "csv": "text/csv; charset=utf-8"}
 
 
+#: The schema of the handlers that answer through ``fast_json`` (a Response the route passes on
+#: as it is): what the OpenAPI document states they return.
+JSON_OBJECT = dict[str, Any]
+CrsKind = Literal["projected", "compound", "vertical", "geocentric"]
+DEFAULT_KINDS: list[CrsKind] = ["projected", "compound"]
+
+
 def fast_json(obj: Any, status_code: int = 200) -> Response:
     """JSON (UTF-8) of plain dicts, lists, numbers and numpy values, through orjson.
 
@@ -100,8 +107,8 @@ def info(request: Request) -> dict[str, Any]:
             "cesium_url": "/cesium/", "scenes_url": "/scenes/"}
 
 
-@router.post("/intersect", summary="Intersect one point's rays (stateless)")
-async def intersect(body: m.IntersectRequest, request: Request) -> dict[str, Any]:
+@router.post("/intersect", response_model=JSON_OBJECT, summary="Intersect one point's rays (stateless)")
+async def intersect(body: m.IntersectRequest, request: Request) -> dict[str, Any] | Response:
     """One point's rays (session-JSON shape) and solving options -> the solved point:
     grid coordinates and covariance (when ``crs`` is given), WGS 84 position, sigma0,
     residuals per ray, outlier flags and warnings (gsgeo.measure.point ``to_dict``)."""
@@ -130,8 +137,8 @@ def intersect_request(body: m.IntersectRequest, data_dir: Path) -> Response:
 @router.get("/crs", summary="Search coordinate reference systems by name, area or code")
 def crs_search(q: Annotated[str, Query(min_length=1, max_length=200,
                                        description="words of the name or area, or a code")],
-               kind: Annotated[list[Literal["projected", "compound", "vertical", "geocentric"]],
-                               Query(description="kinds of CRS to search")] = ("projected", "compound"),
+               kind: Annotated[list[CrsKind],
+                               Query(description="kinds of CRS to search")] = DEFAULT_KINDS,
                limit: Annotated[int, Query(ge=1, le=500)] = 50) -> dict[str, Any]:
     from gsgeo.crs.discovery import search_crs
 
@@ -211,11 +218,12 @@ def import_session(pid: PID, request: Request,
 
 
 # points ----------------------------------------------------------------------------------
-@router.get("/projects/{pid}/points", summary="List points with their solved results")
+@router.get("/projects/{pid}/points", response_model=JSON_OBJECT,
+            summary="List points with their solved results")
 def list_points(pid: PID, request: Request,
                 summary: Annotated[bool, Query(description=(
                     "leave out rays and the full result (record only)"))] = False,
-                ) -> dict[str, Any]:
+                ) -> dict[str, Any] | Response:
     pts = [point_json(q) for q in svc(request).list_points(pid)]
     if summary:
         for q in pts:
@@ -223,19 +231,21 @@ def list_points(pid: PID, request: Request,
     return fast_json({"points": pts})
 
 
-@router.post("/projects/{pid}/points", status_code=201, summary="Solve and store a point")
-def create_point(pid: PID, body: m.PointCreate, request: Request) -> dict[str, Any]:
+@router.post("/projects/{pid}/points", status_code=201, response_model=JSON_OBJECT,
+             summary="Solve and store a point")
+def create_point(pid: PID, body: m.PointCreate, request: Request) -> dict[str, Any] | Response:
     return fast_json(point_json(svc(request).add_point(pid, body.to_input())), 201)
 
 
-@router.get("/projects/{pid}/points/{point_id}", summary="One point")
-def get_point(pid: PID, point_id: ITEM, request: Request) -> dict[str, Any]:
+@router.get("/projects/{pid}/points/{point_id}", response_model=JSON_OBJECT, summary="One point")
+def get_point(pid: PID, point_id: ITEM, request: Request) -> dict[str, Any] | Response:
     return fast_json(point_json(svc(request).get_point(pid, point_id)))
 
 
-@router.patch("/projects/{pid}/points/{point_id}",
+@router.patch("/projects/{pid}/points/{point_id}", response_model=JSON_OBJECT,
               summary="Rename, recode, exclude or restore a ray, or replace rays (re-solves)")
-def patch_point(pid: PID, point_id: ITEM, body: m.PointPatch, request: Request) -> dict[str, Any]:
+def patch_point(pid: PID, point_id: ITEM, body: m.PointPatch,
+                request: Request) -> dict[str, Any] | Response:
     changes = {k: v for k, v in body.model_dump(exclude_unset=True).items() if v is not None}
     if body.rays is not None:
         changes["rays"] = m.rays_of(body.rays)

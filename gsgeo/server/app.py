@@ -16,7 +16,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -189,6 +189,8 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     app.include_router(router)
 
     scene_folders = SceneFolders(config.data_dir)
+    # ServerConfig.__post_init__ always sets both folders.
+    web_dir, cesium_dir = Path(cast(Path, config.web_dir)), Path(cast(Path, config.cesium_dir))
 
     # Static files are read in the thread pool (on the event loop they serialised behind each
     # other and halved tile throughput with 8 clients).
@@ -201,12 +203,12 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
 
     @app.api_route("/cesium/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
     def cesium_file(rel: str, request: Request) -> Response:
-        return file_response(request, Path(config.cesium_dir), rel, CESIUM_CACHE)
+        return file_response(request, cesium_dir, rel, CESIUM_CACHE)
 
     @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
     def index(request: Request) -> Response:
-        if (Path(config.web_dir) / "index.html").is_file():
-            return file_response(request, Path(config.web_dir), "index.html", WEB_CACHE)
+        if (web_dir / "index.html").is_file():
+            return file_response(request, web_dir, "index.html", WEB_CACHE)
         return HTMLResponse(PLACEHOLDER.format(version=__version__))
 
     @app.api_route("/api", methods=["GET"], include_in_schema=False)
@@ -219,7 +221,7 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
 
     def web_file(name: str) -> None:
         def serve(request: Request) -> Response:
-            return file_response(request, Path(config.web_dir), name, WEB_CACHE)
+            return file_response(request, web_dir, name, WEB_CACHE)
 
         app.add_api_route(f"/{name}", serve, methods=["GET", "HEAD"], include_in_schema=False,
                           name=f"web {name}")
@@ -229,7 +231,7 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
 
     @app.api_route("/js/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
     def js_file(rel: str, request: Request) -> Response:
-        return file_response(request, Path(config.web_dir) / "js", rel, WEB_CACHE)
+        return file_response(request, web_dir / "js", rel, WEB_CACHE)
 
     from gsgeo.server.api import UPLOAD_ENDPOINTS
 

@@ -9,11 +9,9 @@ Starlette names only the first route whose path matched.
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Sequence
-from typing import Any
 
 from starlette.routing import BaseRoute, Match
-
-Scope = dict[str, Any]
+from starlette.types import Scope
 
 #: The methods a 405 may list.
 METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")

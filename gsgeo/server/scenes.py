@@ -50,7 +50,7 @@ def _bounds(ts) -> dict[str, float] | None:
 def _splat_count(scene_dir: Path) -> int | None:
     """Total number of splats, through the tiles package's tileset reader when available."""
     try:
-        from gsgeo.tiles import reader  # type: ignore[attr-defined]
+        from gsgeo.tiles import reader
     except ImportError:
         return None
     fn = getattr(reader, "splat_count", None) or getattr(reader, "count_splats", None)
