@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TextIO
+from typing import TextIO, cast
 
 import numpy as np
 
@@ -203,12 +203,23 @@ class WorkerJob:
     order: np.ndarray | None = None
 
     def trees(self, t: int) -> lod.TreeInput:
-        return self.tree2 if t else self.tree
+        if t:
+            # t == 1 only comes from build_tree's root split, which needs tree2
+            return cast(lod.TreeInput, self.tree2)
+        return self.tree
 
 
 WORKER_JOB: WorkerJob | None = None
 #: One build at a time per process: the workers' state is the module-level WORKER_JOB.
 _BUILD_LOCK = threading.Lock()
+
+
+def _job() -> WorkerJob:
+    """The build this (forked) process works for: WORKER_JOB, set before the pool forks."""
+    job = WORKER_JOB
+    if job is None:
+        raise RuntimeError("no tiles build is running in this process")
+    return job
 
 
 def _quantise_blocks(task: tuple[int, int, int]) -> list[tuple[int, int, float]]:
@@ -222,7 +233,7 @@ def _quantise_block(start: int, stop: int) -> tuple[int, int, float]:
     """Read splats [start, stop), drop non-finite ones, turn them into the root frame and
     quantise them into held rows [start, start + kept), with the tree's inputs. Returns
     (start, kept, largest |coordinate| in metres)."""
-    job = WORKER_JOB
+    job = _job()
     s, ok = job.source.read_finite(start, stop)
     if not ok.all():
         s = s.take(ok)
@@ -241,20 +252,25 @@ def _quantise_block(start: int, stop: int) -> tuple[int, int, float]:
     return start, m, extent
 
 
-def _finish_root_half(task: tuple) -> list[tuple]:
+RootHalfPart = tuple[int, int, np.ndarray, np.ndarray, "lod.Node | None"]
+
+
+def _finish_root_half(task: tuple[int, int, int, list[int], int, int, tuple[int, int] | None]
+                      ) -> list[RootHalfPart]:
     """Finish the root's split on one half of its rest (``job.order[keep + lo:keep + hi]``,
     offsets into the first tree columns; the remaining axes), move that half's columns into
     the second set and return its non-empty parts as (lo, hi, box lo, box hi, node), ranges
     of the rest. With ``grow`` (max_splats, parent_splats), the parts become the root's
     children from number ``first`` on, grown to the leaves here (``node``; else None)."""
     keep, lo, hi, axes, n, first, grow = task
-    job = WORKER_JOB
-    src, dst = job.tree, job.tree2
-    idx = job.order[keep + lo:keep + hi]
+    job = _job()
+    # the root split in the workers runs only with both (see build_tree)
+    src, dst = job.tree, cast(lod.TreeInput, job.tree2)
+    idx = cast(np.ndarray, job.order)[keep + lo:keep + hi]
     parts = lod.split_parts(src.pos[:, :n], idx, axes)
     for s, d in zip(src.columns(), dst.columns(), strict=True):
         np.take(s, idx, out=d[keep + lo:keep + hi], mode="clip")
-    out = []
+    out: list[RootHalfPart] = []
     for x, y in parts:
         if y > x:
             a, b = keep + lo + x, keep + lo + y
@@ -270,14 +286,14 @@ def _finish_root_half(task: tuple) -> list[tuple]:
 def _grow_subtree(task: tuple[int, lod.Node, int, int, int, int]) -> lod.Node:
     """Grow the subtree of a node over the range [a, b) of tree columns t in place."""
     t, node, a, b, max_splats, parent_splats = task
-    return lod.grow(WORKER_JOB.trees(t), node, a, b, max_splats, parent_splats)
+    return lod.grow(_job().trees(t), node, a, b, max_splats, parent_splats)
 
 
 def _write_tile(task: tuple[int, str, int, int, int, str]) -> int:
     """Pack, compress and write one tile (its splats: held rows perm[start:stop] of tree
     columns t, sorted, so the gather is near-sequential); returns its number of splats."""
     t, name, start, stop, frac, folder = task
-    job = WORKER_JOB
+    job = _job()
     rows = job.trees(t).perm[start:stop]
     blob, lo, hi = spz.pack_bounded(job.held, job.sh_degree, version=job.spz_version,
                                     fractional_bits=frac, level=job.level, rows=rows)
@@ -335,8 +351,8 @@ def build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,
             break
         frontier += lod.expand(tree, *frontier.pop(big), max_splats, parent_splats)
     by_name = {nd.name: nd for nd, _, _ in frontier}
-    tasks = [(t, nd, a, b, max_splats, parent_splats) for nd, a, b in frontier]
-    for grown in imap(_grow_subtree, tasks):
+    subtrees = [(t, nd, a, b, max_splats, parent_splats) for nd, a, b in frontier]
+    for grown in imap(_grow_subtree, subtrees):
         nd = by_name[grown.name]     # the worker's copy: take its subtree and range
         nd.children, nd.start, nd.stop = grown.children, grown.start, grown.stop
     lod.attach_indices(tree, root)
@@ -455,9 +471,9 @@ def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version
             (tmp / "tiles").mkdir()
             bar = Progress(progress, n, "writing")
             # biggest first so the last tiles to finish are small
-            tasks = [(t, nd.name, nd.start, nd.stop, frac, str(tmp / "tiles"))
+            tile_tasks = [(t, nd.name, nd.start, nd.stop, frac, str(tmp / "tiles"))
                      for nd in sorted(nodes, key=lambda nd: -nd.index.shape[0])]
-            for done in imap(_write_tile, tasks):
+            for done in imap(_write_tile, tile_tasks):
                 bar.update(done)
             bar.close()
             imap.close()   # the workers exit while the tileset JSON is written

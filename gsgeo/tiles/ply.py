@@ -17,9 +17,10 @@ Extra properties are ignored. Anything else is rejected naming the missing prope
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -63,6 +64,11 @@ _CHUNK_REQUIRED = ["min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_sc
 _PACKED = ["packed_position", "packed_rotation", "packed_scale", "packed_color"]
 
 
+def field_names(dtype: np.dtype) -> tuple[str, ...]:
+    """The field names of a record dtype (every dtype here is one; () for a plain one)."""
+    return dtype.names or ()
+
+
 def _compressed_layout(path, fmt, elements, header_end) -> CompressedLayout:
     if fmt != "binary_little_endian":
         raise InputError(f"{path}: a compressed PLY must be binary little endian")
@@ -80,12 +86,13 @@ def _compressed_layout(path, fmt, elements, header_end) -> CompressedLayout:
         raise InputError(f"{path}: a compressed PLY needs 'chunk' and 'vertex' elements")
     n_chunks, cdt = els["chunk"]
     count, vdt = els["vertex"]
-    missing = [n for n in _CHUNK_REQUIRED if n not in cdt.names] + \
-        [n for n in _PACKED if n not in vdt.names]
+    missing = [n for n in _CHUNK_REQUIRED if n not in field_names(cdt)] + \
+        [n for n in _PACKED if n not in field_names(vdt)]
     if missing:
         raise InputError(f"{path}: compressed PLY lacks {', '.join(missing)}")
     colour = [f"{m}_{c}" for c in "rgb" for m in ("min", "max")]
-    if any(n in cdt.names for n in colour) and not all(n in cdt.names for n in colour):
+    if any(n in field_names(cdt) for n in colour) and \
+            not all(n in field_names(cdt) for n in colour):
         raise InputError(f"{path}: compressed PLY chunks have some colour ranges but not all "
                          f"of {', '.join(colour)}")
     not_u32 = [n for n in _PACKED if vdt[n] != np.dtype("<u4")]
@@ -97,11 +104,11 @@ def _compressed_layout(path, fmt, elements, header_end) -> CompressedLayout:
     sh_dt, n_rest = None, 0
     if "sh" in els:
         sh_count, sh_dt = els["sh"]
-        n_rest = len(sh_dt.names)
+        n_rest = len(field_names(sh_dt))
         if sh_count != count or n_rest % 3 or n_rest // 3 not in SH_DEGREE_OF:
             raise InputError(f"{path}: the sh element has {n_rest} properties for {sh_count} "
                              f"splats; expected 9, 24 or 45 for {count}")
-        absent = [f"f_rest_{i}" for i in range(n_rest) if f"f_rest_{i}" not in sh_dt.names]
+        absent = [f"f_rest_{i}" for i in range(n_rest) if f"f_rest_{i}" not in field_names(sh_dt)]
         if absent:
             raise InputError(f"{path}: the sh element lacks {', '.join(absent[:3])}")
     return CompressedLayout(path, count, cdt, offs["chunk"], n_chunks, vdt, offs["vertex"],
@@ -155,7 +162,7 @@ def read_compressed(layout: CompressedLayout, start: int, stop: int, maps=None) 
     rotations = wxyz[:, [1, 2, 3, 0]]
     pc = v["packed_color"]
     rgb = np.stack([_unorm(pc, s, 8) for s in (24, 16, 8)], axis=1)
-    if "min_r" in layout.chunk_dtype.names:
+    if "min_r" in field_names(layout.chunk_dtype):
         for i, c in enumerate("rgb"):
             lo, hi = chunks[f"min_{c}"][ci], chunks[f"max_{c}"][ci]
             rgb[:, i] = lo * (1 - rgb[:, i]) + hi * rgb[:, i]
@@ -165,7 +172,9 @@ def read_compressed(layout: CompressedLayout, start: int, stop: int, maps=None) 
     k = layout.n_rest // 3
     if k:
         b = np.array(sh_all[start:start + n]).view(np.uint8).reshape(n, layout.n_rest)
-        b = b[:, [layout.sh_dtype.names.index(f"f_rest_{i}") for i in range(layout.n_rest)]]
+        # n_rest > 0 only with an sh element, whose dtype the layout then holds
+        sh_names = field_names(cast(np.dtype, layout.sh_dtype))
+        b = b[:, np.array([sh_names.index(f"f_rest_{i}") for i in range(layout.n_rest)])]
         nrm = (b.astype(np.float32) + np.float32(0.5)) / np.float32(256)
         nrm[b == 0], nrm[b == 255] = 0.0, 1.0
         sh = ((nrm - np.float32(0.5)) * np.float32(8)).reshape(n, 3, k).transpose(0, 2, 1)
@@ -340,7 +349,7 @@ def read_layout(path: str | os.PathLike) -> PlyLayout | CompressedLayout:
 
 def records_to_splats(rec: np.ndarray, layout: PlyLayout) -> Splats:
     n = rec.shape[0]
-    names = list(rec.dtype.names)
+    names = list(field_names(rec.dtype))
     uniform = len(set(rec.dtype[i] for i in range(len(names)))) == 1 and \
         rec.dtype[0].kind == "f"
     if uniform:
@@ -407,9 +416,9 @@ class RecordReader:
 
     def __init__(self, layout: PlyLayout, block: int) -> None:
         self.layout, self.block = layout, block
-        self._fd: int | None = None
+        self._fd = -1                                  # opened by the first read
         self._pid = -1
-        self._buf: np.ndarray | None = None
+        self._buf: np.ndarray = np.empty(0, layout.dtype)
 
     def read(self, start: int, stop: int) -> np.ndarray:
         if self._pid != os.getpid():
@@ -421,7 +430,7 @@ class RecordReader:
             self._buf = np.empty(m, self.layout.dtype)
         rec = self._buf[:m]
         size = self.layout.dtype.itemsize
-        view = memoryview(rec.view(np.uint8))
+        view = rec.view(np.uint8).data      # a memoryview of the buffer, written in place
         got = 0
         while got < m * size:
             k = os.preadv(self._fd, [view[got:]], self.layout.data_offset + start * size + got)
@@ -448,6 +457,7 @@ def ply_bounds(layout: PlyLayout, sample: int | None = None,
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     n = 0
+    chunks: Iterable[np.ndarray]
     if layout.fmt != "ascii":
         # a read-only map: only the pages holding the records looked at are touched
         mm = np.memmap(layout.path, layout.dtype, "r", layout.data_offset, (layout.count,))

@@ -51,8 +51,8 @@ class _BinaryPly(Source):
             layout.size_bytes
         self.reader = ply.RecordReader(layout, block)
         dt = layout.dtype
-        uniform = all(dt[i] == np.dtype("<f4") for i in range(len(dt.names)))
-        self._ones = np.ones(len(dt.names), np.float32) if uniform else None
+        uniform = all(dt[i] == np.dtype("<f4") for i in range(len(ply.field_names(dt))))
+        self._ones = np.ones(len(ply.field_names(dt)), np.float32) if uniform else None
 
     def bounds(self):
         lo, hi, n = ply.ply_bounds(self.layout, sample=CENTRE_SAMPLE)

@@ -206,8 +206,8 @@ class Tileset:
         m = parent @ matrix4(t["transform"]) if "transform" in t else parent
         # 3D Tiles 1.1 allows several "contents"; positions share the tile's transform.
         contents = ([t["content"]] if t.get("content") else []) + list(t.get("contents") or [])
-        uris = [c.get("uri") or c.get("url") for c in contents if isinstance(c, dict)]
-        uris = [u for u in uris if u]
+        given = [c.get("uri") or c.get("url") for c in contents if isinstance(c, dict)]
+        uris: list[str] = [u for u in given if u]
         own = [u for u in uris if not u.lower().split("?")[0].endswith(".json")]
         tile = Tile(where, m, t.get("boundingVolume", {}), own[0] if own else None,
                     level=level, base=base, content_uris=own, gltf_up=up)
@@ -277,9 +277,9 @@ class Tileset:
                 if not path.name.lower().endswith((".glb", ".gltf", ".b3dm")):
                     continue
                 c = read_content(path)
-                if c.position_min is None:
+                lo, hi = c.position_min, c.position_max   # set together or not at all
+                if lo is None or hi is None:
                     continue
-                lo, hi = c.position_min, c.position_max
                 box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                                 for z in (lo[2], hi[2])])
                 corners.append(apply_points(self.content_matrix(t, c), box))
@@ -298,8 +298,8 @@ class Tileset:
                               for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
             return apply_points(t.transform, local)
         if "sphere" in bv:
-            s = np.asarray(bv["sphere"], dtype=float)
-            local = np.array([s[:3] + s[3] * np.array([sx, sy, sz])
+            sph = np.asarray(bv["sphere"], dtype=float)
+            local = np.array([sph[:3] + sph[3] * np.array([sx, sy, sz])
                               for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
             return apply_points(t.transform, local)
         if "region" in bv:
