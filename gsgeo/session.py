@@ -19,13 +19,13 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import orjson
 
 from gsgeo import limits
 from gsgeo.errors import InputError, join_field
+from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, MeasurementFailure, Rays, SolveSettings, measure_points
 from gsgeo.measure import measure_point as measure_rays
 
@@ -46,8 +46,8 @@ class Ray:
     viewport: tuple[float, float] | None = None
     model_matrix: np.ndarray | None = None  # 16 numbers, column-major; None = identity
 
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
+    def to_dict(self) -> JSONObject:
+        out: JSONObject = {
             "origin": [float(v) for v in self.origin],
             "direction": [float(v) for v in self.direction],
         }
@@ -127,7 +127,7 @@ def load_session(path: str | Path) -> Session:
         raise exc.in_source(str(p)) from None
 
 
-def parse_json(data: bytes | str) -> Any:
+def parse_json(data: bytes | str) -> JSON:
     """Decode JSON text strictly and with bounded depth (orjson), or InputError saying what and
     where: nesting deeper than 1024 levels, a number beyond a 64-bit float, NaN / Infinity,
     invalid UTF-8 or unpaired surrogates. A leading UTF-8 byte order mark is skipped."""
@@ -144,7 +144,7 @@ def parse_json(data: bytes | str) -> Any:
         raise InputError(f"{what} at line {exc.lineno}, column {exc.colno}") from None
 
 
-def _describe(value: Any) -> str:
+def _describe(value: JSON) -> str:
     """A short description of a JSON value for a message (never the whole of a large value)."""
     if isinstance(value, bool) or value is None:
         return {True: "true", False: "false", None: "null"}[value]
@@ -159,7 +159,7 @@ def _describe(value: Any) -> str:
     return str(value)[:30]
 
 
-def _number(value: Any, field: str | None) -> float:
+def _number(value: JSON, field: str | None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f"expected a number, got {_describe(value)}", field=field)
     try:
@@ -172,13 +172,13 @@ def _number(value: Any, field: str | None) -> float:
     return v
 
 
-def _vector(value: Any, n: int, field: str | None) -> np.ndarray:
+def _vector(value: JSON, n: int, field: str | None) -> np.ndarray:
     if not isinstance(value, list) or len(value) != n:
         raise InputError(f"expected a list of {n} numbers", field=field)
     return np.array([_number(v, join_field(field, f"[{i}]")) for i, v in enumerate(value)])
 
 
-def _text(value: Any, field: str | None, default: str = "") -> str:
+def _text(value: JSON, field: str | None, default: str = "") -> str:
     if value is None:
         return default
     if not isinstance(value, (str, int)) or isinstance(value, bool) or (
@@ -187,7 +187,7 @@ def _text(value: Any, field: str | None, default: str = "") -> str:
     return str(value)
 
 
-def _ray_members(doc: Any, field: str | None) -> Ray:
+def _ray_members(doc: JSON, field: str | None) -> Ray:
     """The JSON shape of one ray object (numbers, lengths, members); ranges are the typed
     core's (gsgeo.measure.Rays)."""
     if not isinstance(doc, dict):
@@ -212,7 +212,7 @@ def _ray_members(doc: Any, field: str | None) -> Ray:
     return Ray(origin, direction, ifov, pixel, viewport, mm)
 
 
-def parse_rays(docs: Sequence[Any], field: str = "") -> tuple[list[Ray], Rays]:
+def parse_rays(docs: Sequence[JSON], field: str = "") -> tuple[list[Ray], Rays]:
     """Validate ray objects of the session JSON: their JSON shape here, their ranges once in
     gsgeo.measure.Rays. Errors name ``field`` (the JSON path of the point) and the ray's
     member inside it, e.g. ``rays[1].direction``."""
@@ -224,7 +224,7 @@ def parse_rays(docs: Sequence[Any], field: str = "") -> tuple[list[Ray], Rays]:
     return rays, typed
 
 
-def parse_ray(doc: Any, field: str = "ray") -> Ray:
+def parse_ray(doc: JSON, field: str = "ray") -> Ray:
     """Validate one ray object of the session JSON; errors name ``field`` (the ray's JSON
     path) and the member inside it, e.g. ``ray.direction``; ``field=""`` names members alone."""
     ray = _ray_members(doc, field)
@@ -236,7 +236,7 @@ def parse_ray(doc: Any, field: str = "ray") -> Ray:
     return ray
 
 
-def parse_point(doc: Any, field: str = "point") -> SessionPoint:
+def parse_point(doc: JSON, field: str = "point") -> SessionPoint:
     """Validate one point object (id, code, description, rays); errors name ``field`` (the
     point's JSON path) and the member inside it; ``field=""`` names members alone (``rays[1]``)."""
     if not isinstance(doc, dict):
@@ -258,7 +258,7 @@ def parse_point(doc: Any, field: str = "point") -> SessionPoint:
     )
 
 
-def _features(doc: Any, key: str) -> list[Feature]:
+def _features(doc: JSON, key: str) -> list[Feature]:
     items = doc.get(key)
     if items is None:
         return []
@@ -277,7 +277,7 @@ def _features(doc: Any, key: str) -> list[Feature]:
     return out
 
 
-def parse_session(doc: Any) -> Session:
+def parse_session(doc: JSON) -> Session:
     """Validate a decoded session document."""
     if not isinstance(doc, dict):
         raise InputError("the session must be a JSON object with a 'points' list")

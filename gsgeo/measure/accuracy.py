@@ -10,9 +10,10 @@ report them.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
+
+from gsgeo.jsontypes import JSONObject
 
 
 def _f(x: float) -> float | None:
@@ -27,7 +28,7 @@ def _sd(d: np.ndarray) -> float:
     return float(np.std(d, ddof=1)) if d.size >= 2 else math.nan
 
 
-def accuracy_report(ids: list[str], measured: np.ndarray, check: np.ndarray) -> dict[str, Any]:
+def accuracy_report(ids: list[str], measured: np.ndarray, check: np.ndarray) -> JSONObject:
     """Per-point differences and summary statistics.
 
     ids : point ids matched between measured and check points (M,).

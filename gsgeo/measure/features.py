@@ -25,6 +25,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gsgeo.errors import GeometryError, InputError
 
@@ -59,7 +60,8 @@ def _name(ids: Sequence[str] | None, i: int) -> str:
     return f"'{ids[i]}'" if ids is not None else f"point {i + 1}"
 
 
-def _check(xyz, cov, ids, what: str) -> tuple[np.ndarray, np.ndarray | None]:
+def _check(xyz: ArrayLike, cov: ArrayLike | None, ids: Sequence[str] | None,
+           what: str) -> tuple[np.ndarray, np.ndarray | None]:
     p = np.asarray(xyz, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] not in (2, 3):
         raise InputError(f"the {what}'s coordinates must be an N x 3 array (E, N, H), got shape "
@@ -122,7 +124,8 @@ def _path_length(p: np.ndarray, dims: int, closed: bool) -> tuple[float, np.ndar
     return float(seg.sum()), g
 
 
-def line_measures(xyz, cov=None, ids: Sequence[str] | None = None, *, unit_m: float = 1.0,
+def line_measures(xyz: ArrayLike, cov: ArrayLike | None = None, ids: Sequence[str] | None = None,
+                  *, unit_m: float = 1.0,
                   vertical_unit_m: float = 1.0) -> LineMeasures:
     """3-D and 2-D length of the polyline through the points in order, with 1-sigma values.
 
@@ -156,7 +159,7 @@ def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
                    - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
 
 
-def _on_segment(a, b, c) -> np.ndarray:
+def _on_segment(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """c within the bounding box of segment a-b (for collinear points)."""
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     return np.all((lo <= c) & (c <= hi), axis=-1)
@@ -202,7 +205,8 @@ def ring_self_intersection(xy: np.ndarray) -> tuple[int, int] | None:
     return None
 
 
-def polygon_measures(xyz, cov=None, ids: Sequence[str] | None = None, *, unit_m: float = 1.0,
+def polygon_measures(xyz: ArrayLike, cov: ArrayLike | None = None,
+                     ids: Sequence[str] | None = None, *, unit_m: float = 1.0,
                      vertical_unit_m: float = 1.0) -> PolygonMeasures:
     """Area and perimeter (2-D, in E, N) of the polygon through the points, with 1-sigma values.
 

@@ -15,13 +15,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from gsgeo import limits
 from gsgeo.errors import InputError
+from gsgeo.jsontypes import JSON, JSONObject
 
 #: The session-JSON members of a ray, in the order they are written.
 RAY_KEYS = ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")
@@ -154,11 +154,11 @@ class Rays:
                 "model)", field=f"rays[{int(missing[0])}].ifov")
         return self.ifov
 
-    def to_json(self) -> list[dict[str, Any]]:
+    def to_json(self) -> list[JSONObject]:
         """The session-JSON ray objects (README, "Session JSON"), members only where given."""
-        out: list[dict[str, Any]] = []
+        out: list[JSONObject] = []
         for i in range(len(self)):
-            ray: dict[str, Any] = {"origin": self.origins[i].tolist(),
+            ray: JSONObject = {"origin": self.origins[i].tolist(),
                                    "direction": self.directions[i].tolist()}
             if self.ifov is not None and not np.isnan(self.ifov[i]):
                 ray["ifov"] = float(self.ifov[i])
@@ -187,7 +187,7 @@ class SolveSettings:
     @classmethod
     def parse(cls, *, crs: str | None = None, vertical: str | None = None,
               geoid: str | Path | None = None, source_crs: str | None = None,
-              sigma_px: Any = 1.0) -> SolveSettings:
+              sigma_px: JSON = 1.0) -> SolveSettings:
         """Settings with sigma_px within gsgeo.limits and an empty source_crs meaning
         EPSG:4978; InputError names the field. The CRSs are parsed where they are used."""
         return cls(crs=crs or None, vertical=vertical or None, geoid=geoid or None,

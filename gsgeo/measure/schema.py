@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from typing import Any
 
 import numpy as np
 
 from gsgeo.crs.grid import GridPoint
+from gsgeo.jsontypes import JSONObject
 from gsgeo.pointschema import RECORD_KEYS, record_of
 from gsgeo.solve import IntersectionResult
 
@@ -57,7 +57,7 @@ class Measurement:
         """Rays used in the solution (excluded ones not counted)."""
         return int((~self.excluded).sum())
 
-    def record(self) -> dict[str, Any]:
+    def record(self) -> JSONObject:
         """The point-schema row, keys in order; grid fields None without a grid."""
         g = self.grid
         s = self.solution
@@ -85,7 +85,7 @@ class Measurement:
                     cov_nn=float(c[1, 1]), cov_nh=float(c[1, 2]), cov_hh=float(c[2, 2]))
         return rec
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JSONObject:
         """record() plus rays, warnings, 95 % ellipsoid axes and the ENU solution (JSON-ready)."""
         out = self.record()
         rays = []

@@ -20,11 +20,12 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, overload
+from typing import Literal, overload
 
 import orjson
 
 from gsgeo.errors import InputError
+from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.service.validate import item_id
 
 ID_COLUMNS = ("point_id", "id", "name", "label")
@@ -53,14 +54,14 @@ def format_from_name(filename: str | None) -> str | None:
 
 
 @overload
-def _num(value: Any, field: str, optional: Literal[False] = False) -> float: ...
+def _num(value: JSON, field: str, optional: Literal[False] = False) -> float: ...
 
 
 @overload
-def _num(value: Any, field: str, optional: bool) -> float | None: ...
+def _num(value: JSON, field: str, optional: bool) -> float | None: ...
 
 
-def _num(value: Any, field: str, optional: bool = False) -> float | None:
+def _num(value: JSON, field: str, optional: bool = False) -> float | None:
     """A coordinate of a check-point file; ``field`` is where it is in the file (line and
     column of a CSV, JSON path of a GeoJSON)."""
     if value is None or (isinstance(value, str) and not value.strip()):
@@ -130,7 +131,7 @@ def _read_csv(data: bytes) -> list[CheckPointRow]:
     return rows
 
 
-def _feature_id(props: dict, fallback: Any, field: str) -> str:
+def _feature_id(props: JSONObject, fallback: JSON, field: str) -> str:
     for key in ID_COLUMNS:
         for k, v in props.items():
             if k.lower() == key and v is not None:

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.export import write_measurements
+from gsgeo.jsontypes import JSONObject
 from gsgeo.measure import Measurement
 from gsgeo.service.measuring import measure, stored_rays
 from gsgeo.service.projects import (
@@ -38,8 +38,8 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
         if project.vertical or project.geoid:
             settings |= {"vertical": None, "geoid": None}  # a vertical datum belongs to its grid
         settings = validate_settings(settings, svc.data_dir)
-        measurements: list[Measurement | dict[str, Any]] = []
-        by_id: dict[str, dict[str, Any] | None] = {}
+        measurements: list[Measurement | JSONObject] = []
+        by_id: dict[str, JSONObject | None] = {}
         for pt in points:
             try:
                 m = measure(stored_rays(pt.rays), settings, pt.excluded, svc.data_dir,
@@ -62,7 +62,7 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
 
     proj = replace(project, crs=grid_crs,
                    vertical=project.vertical if grid_crs == project.crs else None)
-    kept: dict[str, list[dict[str, Any]]] = {"line": [], "polygon": []}
+    kept: dict[str, list[JSONObject]] = {"line": [], "polygon": []}
     skipped: list[str] = []
     for kind in ("line", "polygon"):
         for f, _ in svc.list_features(pid, kind):

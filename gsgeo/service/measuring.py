@@ -13,12 +13,13 @@ from pathlib import Path
 from typing import Any
 
 from gsgeo.errors import CRSError, InputError
+from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, Rays, SolveSettings, measure_point
 from gsgeo.measure.schema import record_of
 from gsgeo.session import parse_rays
 
 
-def json_ready(value: Any) -> Any:
+def json_ready(value: Any) -> JSON:
     """``value`` with every non-finite float replaced by None (JSON has no NaN)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
@@ -31,7 +32,7 @@ def json_ready(value: Any) -> Any:
     return value
 
 
-def stored_rays(rays: list[dict[str, Any]]) -> Rays:
+def stored_rays(rays: list[JSONObject]) -> Rays:
     """The typed rays of a point's session-JSON rays as stored (or given); errors name
     ``rays[i].<member>``."""
     return parse_rays(rays)[1]
@@ -65,7 +66,7 @@ def find_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
     return path
 
 
-def solve_settings(settings: dict[str, Any], data_dir: Path | None) -> SolveSettings:
+def solve_settings(settings: JSONObject, data_dir: Path | None) -> SolveSettings:
     """A project's settings (checked by gsgeo.service.projects.validate_settings) as the typed
     core's, the geoid looked up in DATA/geoids/."""
     return SolveSettings(crs=settings.get("crs"), vertical=settings.get("vertical"),
@@ -74,7 +75,7 @@ def solve_settings(settings: dict[str, Any], data_dir: Path | None) -> SolveSett
                          sigma_px=float(settings.get("sigma_px") or 1.0))
 
 
-def measure(rays: Rays, settings: dict[str, Any], excluded: list[int],
+def measure(rays: Rays, settings: JSONObject, excluded: list[int],
             data_dir: Path | None = None, *, point_id: str = "P", code: str = "",
             description: str = "") -> Measurement:
     """The gsgeo.measure.point Measurement of ``rays`` with a project's ``settings``."""
@@ -82,12 +83,12 @@ def measure(rays: Rays, settings: dict[str, Any], excluded: list[int],
                          code=code, description=description, exclude=excluded)
 
 
-def measured_result(m: Measurement) -> dict[str, Any]:
+def measured_result(m: Measurement) -> JSONObject:
     """The stored result of a Measurement (to_dict, JSON-ready); its point-schema record is
     derived from it (gsgeo.measure.schema.record_of), never stored beside it."""
     return json_ready(m.to_dict())
 
 
-def with_record(result: dict[str, Any] | None) -> dict[str, Any] | None:
+def with_record(result: JSONObject | None) -> JSONObject | None:
     """The point-schema record of a stored result, or None."""
     return None if result is None else record_of(result)

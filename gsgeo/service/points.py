@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gsgeo.errors import InputError
+from gsgeo.jsontypes import JSON
 from gsgeo.measure import Rays
 from gsgeo.service.measuring import stored_rays
 
@@ -38,7 +39,7 @@ def check_ray_count(n: int, field: str = "rays") -> None:
         raise InputError(f"more than {MAX_RAYS} rays", field=field)
 
 
-def rays_input(rays: Any, field: str = "rays") -> Rays:
+def rays_input(rays: JSON, field: str = "rays") -> Rays:
     """Session-JSON ray objects -> Rays (2 to MAX_RAYS of them); errors name ``rays[i]...``."""
     if isinstance(rays, Rays):
         check_ray_count(len(rays), field)

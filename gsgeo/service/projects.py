@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, Rays
 from gsgeo.measure.accuracy import accuracy_report
 from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
@@ -51,7 +52,7 @@ KINDS = {"line": 2, "polygon": 3}  # kind -> minimum number of points
 MAX_FEATURE_POINTS = 10_000
 
 
-def _text(value: Any, field: str, max_len: int = 2000) -> str:
+def _text(value: JSON, field: str, max_len: int = 2000) -> str:
     if value is None:
         return ""
     if not isinstance(value, str):
@@ -61,7 +62,7 @@ def _text(value: Any, field: str, max_len: int = 2000) -> str:
     return value
 
 
-def validate_settings(settings: dict[str, Any], data_dir: Path | None) -> dict[str, Any]:
+def validate_settings(settings: JSONObject, data_dir: Path | None) -> JSONObject:
     """Check crs / vertical / geoid / source_crs / sigma_px through gsgeo.crs; CRSError names the field."""
     from gsgeo.crs.resolve import grid_crs, source_crs
 
@@ -98,8 +99,8 @@ def validate_settings(settings: dict[str, Any], data_dir: Path | None) -> dict[s
     return out
 
 
-def intersect_request(point: PointInput, settings: dict[str, Any],
-                      data_dir: Path | None) -> tuple[list[int], dict[str, Any]]:
+def intersect_request(point: PointInput, settings: JSONObject,
+                      data_dir: Path | None) -> tuple[list[int], JSONObject]:
     """Check a point measured without storing it (POST /api/intersect): its excluded rays
     (errors name ``exclude``) and ``settings`` as a project's. Returns both, checked, for
     gsgeo.service.measuring.measure."""
@@ -108,7 +109,7 @@ def intersect_request(point: PointInput, settings: dict[str, Any],
     return excluded, validate_settings(settings, data_dir)
 
 
-def intersect_point(point: PointInput, settings: dict[str, Any],
+def intersect_point(point: PointInput, settings: JSONObject,
                     data_dir: Path | None) -> Measurement:
     """Measure one point without storing it: :func:`intersect_request` and measure."""
     excluded, checked = intersect_request(point, settings, data_dir)
@@ -142,7 +143,7 @@ class Projects:
         with self.store.transaction(write=False) as tx:
             return self._project(tx, pid)
 
-    def project_summary(self, pid: str) -> dict[str, Any]:
+    def project_summary(self, pid: str) -> JSONObject:
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
             pts = tx.list_points(pid)
@@ -183,7 +184,7 @@ class Projects:
                                  field="scene")
         return scene
 
-    def update_project(self, pid: str, changes: dict[str, Any]) -> Project:
+    def update_project(self, pid: str, changes: JSONObject) -> Project:
         """Change name/description/scene and solving settings; a settings change re-measures
         every point from its rays in the same transaction."""
         unknown = set(changes) - {"name", "description", "scene", *SETTINGS}
@@ -272,7 +273,7 @@ class Projects:
             raise NotFoundError(f"point '{point_id}' does not exist in project '{pid}'")
         return pt
 
-    def add_point(self, pid: str, point: PointInput | dict[str, Any]) -> PointRecord:
+    def add_point(self, pid: str, point: PointInput | JSONObject) -> PointRecord:
         """Measure and store a point: a PointInput (typed rays) or a mapping
         {id?, code?, description?, rays, excluded?} in the session-JSON shape.
 
@@ -303,7 +304,7 @@ class Projects:
         nums = [int(m.group(1)) for s in existing if (m := re.fullmatch(r"P(\d{1,9})", s))]
         return f"P{max(nums, default=0) + 1}"
 
-    def update_point(self, pid: str, point_id: str, changes: dict[str, Any]) -> PointRecord:
+    def update_point(self, pid: str, point_id: str, changes: JSONObject) -> PointRecord:
         """Rename (id), recode (code, description), exclude or restore rays, or replace rays.
 
         changes keys: id, code, description, excluded (full list of 0-based indices),
@@ -376,7 +377,7 @@ class Projects:
                                     "delete or change those first")
             tx.delete_point(pid, point_id)
 
-    def import_session(self, pid: str, doc: Any) -> dict[str, int]:
+    def import_session(self, pid: str, doc: JSON) -> dict[str, int]:
         """Add the points, lines and polygons of a session JSON document, all or nothing.
 
         Points are solved with the project's settings (the session's own crs/sigma_px are
@@ -422,7 +423,7 @@ class Projects:
                 "polygons": len(session.polygons)}
 
     # lines and polygons ---------------------------------------------------------------
-    def _feature_points(self, tx: Transaction, pid: str, kind: str, ids: Any) -> list[str]:
+    def _feature_points(self, tx: Transaction, pid: str, kind: str, ids: JSON) -> list[str]:
         if not isinstance(ids, list):
             raise InputError("expected a list of point ids", field="points")
         out = [item_id(v, f"points[{i}]") for i, v in enumerate(ids)]
@@ -446,14 +447,14 @@ class Projects:
                                  field=f"points[{i}]")
         return out
 
-    def list_features(self, pid: str, kind: str) -> list[tuple[FeatureRecord, dict[str, Any]]]:
+    def list_features(self, pid: str, kind: str) -> list[tuple[FeatureRecord, JSONObject]]:
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
             feats = tx.list_features(pid, kind)
             recs = {q.id: q.record for q in tx.list_points(pid)}
         return [(f, feature_measures(f, recs, p)) for f in feats]
 
-    def get_feature(self, pid: str, kind: str, fid: str) -> tuple[FeatureRecord, dict[str, Any]]:
+    def get_feature(self, pid: str, kind: str, fid: str) -> tuple[FeatureRecord, JSONObject]:
         with self.store.transaction(write=False) as tx:
             f = self._feature(tx, pid, kind, fid)
             p = self._project(tx, pid)
@@ -467,7 +468,7 @@ class Projects:
             raise NotFoundError(f"{kind} '{fid}' does not exist in project '{pid}'")
         return f
 
-    def add_feature(self, pid: str, kind: str, doc: dict[str, Any]) -> FeatureRecord:
+    def add_feature(self, pid: str, kind: str, doc: JSONObject) -> FeatureRecord:
         with self.store.transaction() as tx:
             self._project(tx, pid)
             ids = self._feature_points(tx, pid, kind, doc.get("points"))
@@ -488,7 +489,7 @@ class Projects:
             tx.insert_feature(f)
             return f
 
-    def update_feature(self, pid: str, kind: str, fid: str, changes: dict[str, Any]) -> FeatureRecord:
+    def update_feature(self, pid: str, kind: str, fid: str, changes: JSONObject) -> FeatureRecord:
         unknown = set(changes) - {"id", "points", "code", "description"}
         if unknown:
             raise InputError(f"not a {kind} field that can be changed", field=sorted(unknown)[0])
@@ -575,7 +576,7 @@ class Projects:
             self._project(tx, pid)
             return tx.delete_all_check_points(pid)
 
-    def accuracy(self, pid: str, role: str = "check") -> dict[str, Any]:
+    def accuracy(self, pid: str, role: str = "check") -> JSONObject:
         """Measured minus check point coordinates in the project's grid, matched by id."""
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
@@ -625,8 +626,8 @@ def check_points_in_grid(cps: list[CheckPointRecord], project: Project,
     return points_in_grid(xyz, [c.crs for c in cps], settings, crs=crs, height_hint=height_hint)
 
 
-def feature_measures(f: FeatureRecord, records: dict[str, dict[str, Any] | None],
-                     project: Project) -> dict[str, Any]:
+def feature_measures(f: FeatureRecord, records: dict[str, JSONObject | None],
+                     project: Project) -> JSONObject:
     """Lengths (line) or area and perimeter (polygon) with 1-sigma values, in metres and m²,
     from the points' grid coordinates and covariances (gsgeo.measure.features); an ``error``
     entry says why they cannot be computed. ``records``: point id -> its point-schema record

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import re
-from typing import Any
 
 from gsgeo import limits
 from gsgeo.errors import InputError
+from gsgeo.jsontypes import JSON
 
 #: Project and scene ids: safe in URLs and file names.
 SLUG = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
@@ -16,7 +16,7 @@ MAX_ID_LEN = 100
 _BAD_ID_CHARS = re.compile(r"[/\\]")
 
 
-def slug(value: Any, field: str) -> str:
+def slug(value: JSON, field: str) -> str:
     """A project or scene id (SLUG), or InputError about ``field``."""
     if not isinstance(value, str) or not SLUG.match(value):
         raise InputError("must be 1-64 characters of letters, digits, '_', '.', '-' starting "
@@ -24,7 +24,7 @@ def slug(value: Any, field: str) -> str:
     return value
 
 
-def item_id(value: Any, field: str) -> str:
+def item_id(value: JSON, field: str) -> str:
     """A point, line, polygon or check point id, stripped of surrounding blanks; InputError
     for a control character (checked before stripping), '/', '\\', '.', '..', or more than
     MAX_ID_LEN characters."""
@@ -36,6 +36,6 @@ def item_id(value: Any, field: str) -> str:
     return v
 
 
-def sigma_px(value: Any, field: str = "sigma_px") -> float:
+def sigma_px(value: JSON, field: str = "sigma_px") -> float:
     """The aiming precision in pixels within gsgeo.limits' range (SIGMA_PX_MIN..SIGMA_PX_MAX)."""
     return limits.sigma_px(value, field)

@@ -9,9 +9,9 @@ the rays whenever the project's CRS, vertical datum, source CRS or sigma_px chan
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from gsgeo.errors import GsgeoError, InputError
+from gsgeo.jsontypes import JSONObject
 from gsgeo.pointschema import record_of
 
 
@@ -44,7 +44,7 @@ class Project:
     created_at: str = ""
     updated_at: str = ""
 
-    def settings(self) -> dict[str, Any]:
+    def settings(self) -> JSONObject:
         """The settings a point is solved with."""
         return {"crs": self.crs, "vertical": self.vertical, "geoid": self.geoid,
                 "source_crs": self.source_crs, "sigma_px": self.sigma_px}
@@ -56,14 +56,14 @@ class PointRecord:
 
     project_id: str
     id: str
-    rays: list[dict[str, Any]]
+    rays: list[JSONObject]
     code: str = ""
     description: str = ""
     excluded: list[int] = field(default_factory=list)  # 0-based ray indices left out
-    result: dict[str, Any] | None = None  # Measurement.to_dict(); None when not solved
+    result: JSONObject | None = None  # Measurement.to_dict(); None when not solved
     # The point-schema row: a view of ``result`` (gsgeo.pointschema.record_of), derived when
     # the record is made and not stored, so a rename changes one copy only.
-    record: dict[str, Any] | None = None
+    record: JSONObject | None = None
     error: str | None = None  # why the point could not be solved with the current settings
     solved_rev: int = -1
     seq: int = 0  # creation order

@@ -15,9 +15,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from gsgeo.errors import GsgeoError
+from gsgeo.jsontypes import JSON
 from gsgeo.store.base import Store, Transaction
 from gsgeo.store.migrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.records import (
@@ -41,11 +41,11 @@ def now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-def _dumps(value: Any) -> str:
+def _dumps(value: JSON) -> str:
     return json.dumps(value, separators=(",", ":"), allow_nan=False)
 
 
-def _loads(text: str | None) -> Any:
+def _loads(text: str | None) -> JSON:
     return None if text is None else json.loads(text)
 
 
