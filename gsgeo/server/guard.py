@@ -18,16 +18,11 @@ from __future__ import annotations
 
 import json
 import secrets
-from collections.abc import Awaitable, Callable
-from typing import Any
+from collections.abc import Callable
 from urllib.parse import unquote
 
 from starlette.requests import cookie_parser
-
-Scope = dict[str, Any]
-Message = dict[str, Any]
-ASGIApp = Callable[[Scope, Callable[[], Awaitable[Message]], Callable[[Message], Awaitable[None]]],
-                   Awaitable[None]]
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 MiB = 1024 * 1024
 
@@ -43,7 +38,7 @@ class BodyTooLarge(Exception):
         self.limit = limit
 
 
-async def _send_json(send, status: int, message: str, field: str | None = None,
+async def _send_json(send: Send, status: int, message: str, field: str | None = None,
                      headers: list[tuple[bytes, bytes]] | None = None) -> None:
     body = json.dumps({"detail": message, "message": message, "field": field}).encode()
     await send({"type": "http.response.start", "status": status,
@@ -93,7 +88,7 @@ class Guard:
         return any([secrets.compare_digest(t.encode(), want)
                     for t in presented_tokens(headers, with_cookie)])
 
-    async def __call__(self, scope: Scope, receive, send) -> None:
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return

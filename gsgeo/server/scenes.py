@@ -18,12 +18,15 @@ import os
 import threading
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gsgeo.service import DB_NAME
 from gsgeo.service.validate import SLUG
+
+if TYPE_CHECKING:
+    from gsgeo.tiles.tileset import Tileset
 
 #: The store file and the files SQLite keeps beside it.
 STORE_SUFFIXES = ("", "-wal", "-shm", "-journal")
@@ -32,7 +35,7 @@ _cache: dict[Path, tuple[tuple[int, int], dict[str, Any]]] = {}
 _cache_lock = threading.Lock()
 
 
-def _bounds(ts) -> dict[str, float] | None:
+def _bounds(ts: Tileset) -> dict[str, float] | None:
     """Longitude/latitude (degrees) and ellipsoidal height (m) box of the root bounding volume."""
     from gsgeo.errors import GsgeoError
 
