@@ -33,7 +33,7 @@ CHUNK = 10000
 _SPECIAL = (",", '"', "\r", "\n")
 
 
-def _quote(v) -> str:
+def _quote(v: object) -> str:
     """A text field as csv.writer (QUOTE_MINIMAL) writes it; None -> empty."""
     if v is None:
         return ""

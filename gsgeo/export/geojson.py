@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterator
 from pathlib import Path
 from typing import cast
 
@@ -104,7 +105,8 @@ def _point_geometries(pos: np.ndarray) -> list[bytes]:
     return [b'{"type":"Point","coordinates":[%b,%b,%b]}' % c for c in zip(x, y, z, strict=True)]
 
 
-def _layers(data: ExportData, grid: bool):
+def _layers(data: ExportData, grid: bool
+            ) -> Iterator[tuple[str, Table, str, list[bytes], dict[str, str]]]:
     """(layer, table, id column, geometry JSON texts, constant properties) of each layer."""
     xyz = data.point_xyz if grid else data.point_llh
     pos = _positions(xyz, grid)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import cast
 
@@ -129,7 +130,7 @@ def _shapely_wkb(geoms: list, dims: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @contextlib.contextmanager
-def _no_sqlite_sync():
+def _no_sqlite_sync() -> Iterator[None]:
     """SQLite without fsync per commit: the file is a temporary one that gsgeo.export.atomic
     fsyncs once before renaming it, so durability is kept at a fraction of the cost.
     (A GDAL config option is process-wide; either value is safe for a concurrent write.)"""

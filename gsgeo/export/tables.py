@@ -20,8 +20,9 @@ from operator import attrgetter
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from gsgeo.crs.resolve import grid_crs, parse_crs
+from gsgeo.crs.resolve import GridCRS, grid_crs, parse_crs
 from gsgeo.errors import CRSError, GeometryError, GsgeoError, InputError
 from gsgeo.measure.features import (
     LineArrays,
@@ -245,7 +246,8 @@ def _resolve(kind: str, fid: str, pids: list[str], index: dict[str, int],
     return np.array(out, dtype=np.int64)
 
 
-def ellipse_rings(e, n, major, minor, bearing_deg, unit_m: float = 1.0,
+def ellipse_rings(e: ArrayLike, n: ArrayLike, major: ArrayLike, minor: ArrayLike,
+                  bearing_deg: ArrayLike, unit_m: float = 1.0,
                   vertices: int = ELLIPSE_VERTICES) -> np.ndarray:
     """Closed counterclockwise rings (M, vertices + 1, 2) of ellipses in (E, N).
 
@@ -369,7 +371,7 @@ def _check_text(layer: str, table: Table) -> None:
     """Every text value can be written as UTF-8 (JSON input can hold lone surrogates such as
     "\\ud800", which no export format can store)."""
 
-    def ok(v) -> bool:
+    def ok(v: object) -> bool:
         try:
             str(v).encode("utf-8")
         except UnicodeEncodeError:
@@ -394,7 +396,7 @@ def _check_text(layer: str, table: Table) -> None:
         raise InputError(problem, field=f"{layer}[{k}]")
 
 
-def _measurement_rays(ms: list):
+def _measurement_rays(ms: list) -> tuple[np.ndarray, ...] | None:
     """`_rays` for many Measurement objects at once: (owners, counts, origins, px, m, out, exc)."""
     org, px, rm, out, exc = _fields(
         ms, ("ray_origins_grid", "residuals_px", "residuals_m", "outliers", "excluded"))
@@ -407,7 +409,7 @@ def _measurement_rays(ms: list):
         org, px, rm, out, exc = ([v[i] for i in have] for v in (org, px, rm, out, exc))
     counts = np.fromiter(map(len, org), dtype=np.int64, count=len(org))
 
-    def cat(vals, fill):
+    def cat(vals: list[Any], fill: float) -> np.ndarray:
         if type(None) not in set(map(type, vals)):
             return np.concatenate(vals)
         return np.concatenate([np.full(c, fill) if v is None else np.asarray(v)
@@ -454,7 +456,8 @@ def _ids_text(pids: Sequence[str]) -> str:
     return json.dumps(list(pids), ensure_ascii=False)
 
 
-def _parse_features(items: Iterable[Any], kind: str, index, failed) -> tuple[list, GsgeoError | None]:
+def _parse_features(items: Iterable[Any], kind: str, index: dict[str, int],
+                    failed: dict[str, str]) -> tuple[list, GsgeoError | None]:
     """(id, point ids, point indices) of each line/polygon up to the first malformed one, and its error."""
     seen: set[str] = set()
     rows = []
@@ -505,7 +508,9 @@ def _measure_features(kind: str, rows: list, xyz: np.ndarray, cov: np.ndarray, u
     return out
 
 
-def _collect_features(data, lines, polygons, index, failed, ids, xyz, cov, g) -> None:
+def _collect_features(data: ExportData, lines: Iterable[Any], polygons: Iterable[Any],
+                      index: dict[str, int], failed: dict[str, str], ids: list[str],
+                      xyz: np.ndarray, cov: np.ndarray, g: GridCRS) -> None:
     unit, vunit = g.unit_factor, g.vertical_unit_factor
     rows, err = _parse_features(lines, "line", index, failed)
     if rows:
@@ -542,7 +547,8 @@ def _collect_features(data, lines, polygons, index, failed, ids, xyz, cov, g) ->
         raise err
 
 
-def _collect_check_points(data, check_points, index, xyz, g) -> None:
+def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: dict[str, int],
+                          xyz: np.ndarray, g: GridCRS) -> None:
     """Check points in the export's grid CRS: id and easting/northing[/height] (or x/y/z)."""
     rows = []
     for i, c in enumerate(check_points):

@@ -9,6 +9,8 @@ Coordinates are written as given (E, N[, H] in the CRS's units); nothing is chec
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 POINT, LINESTRING, POLYGON = 1, 2, 3
@@ -67,7 +69,7 @@ def polygons(rings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _result(rec)
 
 
-def from_bytes(items) -> tuple[np.ndarray, np.ndarray]:
+def from_bytes(items: Iterable[bytes]) -> tuple[np.ndarray, np.ndarray]:
     """(offsets, data) of a sequence of WKB byte strings (e.g. from shapely.to_wkb)."""
     items = list(items)
     offsets = np.zeros(len(items) + 1, dtype=np.int64)
