@@ -28,6 +28,7 @@ from gsgeo.errors import InputError, join_field
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, MeasurementFailure, Rays, SolveSettings, measure_points
 from gsgeo.measure import measure_point as measure_rays
+from gsgeo.solve.linalg import FloatArray
 
 #: Largest session file read, bytes (10 000 points of 10 rays take about 5 MB).
 MAX_SESSION_BYTES = 200 * 1024 * 1024
@@ -39,12 +40,12 @@ IDENTITY16 = (1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0)
 class Ray:
     """One aim: rendered-ECEF origin and direction (metres), optional pixel metadata."""
 
-    origin: np.ndarray
-    direction: np.ndarray
+    origin: FloatArray
+    direction: FloatArray
     ifov: float | None = None
     pixel: tuple[float, float] | None = None
     viewport: tuple[float, float] | None = None
-    model_matrix: np.ndarray | None = None  # 16 numbers, column-major; None = identity
+    model_matrix: FloatArray | None = None  # 16 numbers, column-major; None = identity
 
     def to_dict(self) -> JSONObject:
         out: JSONObject = {
@@ -172,7 +173,7 @@ def _number(value: JSON, field: str | None) -> float:
     return v
 
 
-def _vector(value: JSON, n: int, field: str | None) -> np.ndarray:
+def _vector(value: JSON, n: int, field: str | None) -> FloatArray:
     if not isinstance(value, list) or len(value) != n:
         raise InputError(f"expected a list of {n} numbers", field=field)
     return np.array([_number(v, join_field(field, f"[{i}]")) for i, v in enumerate(value)])

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from gsgeo.jsontypes import JSONObject
+from gsgeo.solve.linalg import FloatArray
 
 
 def _f(x: float) -> float | None:
@@ -28,7 +29,7 @@ def _sd(d: np.ndarray) -> float:
     return float(np.std(d, ddof=1)) if d.size >= 2 else math.nan
 
 
-def accuracy_report(ids: list[str], measured: np.ndarray, check: np.ndarray) -> JSONObject:
+def accuracy_report(ids: list[str], measured: FloatArray, check: FloatArray) -> JSONObject:
     """Per-point differences and summary statistics.
 
     ids : point ids matched between measured and check points (M,).

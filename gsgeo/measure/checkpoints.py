@@ -17,11 +17,12 @@ from gsgeo.crs.resolve import parse_crs, projected_crs
 from gsgeo.crs.transformers import transformer
 from gsgeo.errors import CRSError
 from gsgeo.measure.rays import SolveSettings
+from gsgeo.solve.linalg import FloatArray
 
 
-def check_points_in_grid(xyz: np.ndarray, crss: Sequence[str], settings: SolveSettings,
+def check_points_in_grid(xyz: FloatArray, crss: Sequence[str], settings: SolveSettings,
                          crs: str | None = None,
-                         height_hint: np.ndarray | None = None) -> np.ndarray:
+                         height_hint: FloatArray | None = None) -> FloatArray:
     """(M, 3) easting, northing, height of check points in the grid of ``settings`` (or ``crs``).
 
     xyz : (M, 3) coordinates as surveyed, each row in ``crss[i]`` (its units, NaN height

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from gsgeo.errors import GeometryError, InputError
+from gsgeo.solve.linalg import FloatArray
 
 
 @dataclass
@@ -272,10 +273,10 @@ class LineArrays:
     """line_measures of K lines as arrays (NaN where the single function gives None)."""
 
     n_points: np.ndarray  # (K,) int
-    length_2d: np.ndarray
-    sigma_length_2d: np.ndarray
-    length_3d: np.ndarray
-    sigma_length_3d: np.ndarray
+    length_2d: FloatArray
+    sigma_length_2d: FloatArray
+    length_3d: FloatArray
+    sigma_length_3d: FloatArray
 
 
 @dataclass
@@ -283,10 +284,10 @@ class PolygonArrays:
     """polygon_measures of K polygons as arrays."""
 
     n_points: np.ndarray  # (K,) int
-    area_2d: np.ndarray
-    sigma_area_2d: np.ndarray
-    perimeter_2d: np.ndarray
-    sigma_perimeter_2d: np.ndarray
+    area_2d: FloatArray
+    sigma_area_2d: FloatArray
+    perimeter_2d: FloatArray
+    sigma_perimeter_2d: FloatArray
     counterclockwise: np.ndarray  # (K,) bool
 
 

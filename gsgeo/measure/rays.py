@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike
 from gsgeo import limits
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSON, JSONObject
+from gsgeo.solve.linalg import FloatArray
 
 #: The session-JSON members of a ray, in the order they are written.
 RAY_KEYS = ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")
@@ -56,12 +57,12 @@ class Rays:
     Validated on construction; InputError names ``rays[i].<member>``.
     """
 
-    origins: np.ndarray
-    directions: np.ndarray
-    ifov: np.ndarray | None = None
-    pixels: np.ndarray | None = None
-    viewports: np.ndarray | None = None
-    model_matrices: np.ndarray | None = None
+    origins: FloatArray
+    directions: FloatArray
+    ifov: FloatArray | None = None
+    pixels: FloatArray | None = None
+    viewports: FloatArray | None = None
+    model_matrices: FloatArray | None = None
 
     def __post_init__(self) -> None:
         o = np.asarray(self.origins, dtype=np.float64).reshape(-1, 3)
@@ -132,13 +133,13 @@ class Rays:
     def __len__(self) -> int:
         return int(self.origins.shape[0])
 
-    def model_matrix(self, i: int) -> np.ndarray | None:
+    def model_matrix(self, i: int) -> FloatArray | None:
         """The (4, 4) modelMatrix of ray ``i``, None for identity (none given)."""
         if self.model_matrices is None or np.all(np.isnan(self.model_matrices[i])):
             return None
         return self.model_matrices[i]
 
-    def angular_ifov(self) -> np.ndarray | None:
+    def angular_ifov(self) -> FloatArray | None:
         """ifov (N,) of every ray for the angular model, None for the unweighted model.
 
         The angular model needs ifov on every ray; ifov on some rays only is an InputError

@@ -17,6 +17,7 @@ from gsgeo.crs.grid import GridPoint
 from gsgeo.jsontypes import JSONObject
 from gsgeo.pointschema import RECORD_KEYS, record_of
 from gsgeo.solve import IntersectionResult
+from gsgeo.solve.linalg import FloatArray
 
 __all__ = ["RECORD_KEYS", "Measurement", "MeasurementFailure", "now_utc", "record_of"]
 
@@ -33,20 +34,20 @@ class Measurement:
     code: str
     description: str
     solution: IntersectionResult  # in the local ENU frame
-    enu_origin_ecef: np.ndarray  # (3,)
-    point_ecef: np.ndarray  # (3,) georeferenced ECEF on source_crs, m
-    cov_ecef: np.ndarray  # (3, 3) m^2
+    enu_origin_ecef: FloatArray  # (3,)
+    point_ecef: FloatArray  # (3,) georeferenced ECEF on source_crs, m
+    cov_ecef: FloatArray  # (3, 3) m^2
     grid: GridPoint | None
-    ray_origins_ecef: np.ndarray  # (N, 3) georeferenced
-    ray_directions_ecef: np.ndarray  # (N, 3) georeferenced, unit
-    ray_origins_grid: np.ndarray | None  # (N, 3) E, N, H of the camera centres
+    ray_origins_ecef: FloatArray  # (N, 3) georeferenced
+    ray_directions_ecef: FloatArray  # (N, 3) georeferenced, unit
+    ray_origins_grid: FloatArray | None  # (N, 3) E, N, H of the camera centres
     excluded: np.ndarray  # (N,) bool
     measured_at: str
     source_crs: str = "EPSG:4978"
-    residuals_m: np.ndarray | None = None  # (N,) every ray, excluded ones too
-    residuals_px: np.ndarray | None = None  # (N,) angular model only
+    residuals_m: FloatArray | None = None  # (N,) every ray, excluded ones too
+    residuals_px: FloatArray | None = None  # (N,) angular model only
     outliers: np.ndarray | None = None  # (N,) bool; excluded rays False
-    ifov: np.ndarray | None = None  # (N,)
+    ifov: FloatArray | None = None  # (N,)
     lon: float | None = None  # WGS 84, degrees
     lat: float | None = None
     h_wgs84: float | None = None

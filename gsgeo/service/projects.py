@@ -37,6 +37,7 @@ from gsgeo.service.measuring import (
 )
 from gsgeo.service.points import PointInput, check_ray_count, point_input, rays_input
 from gsgeo.service.validate import item_id, sigma_px, slug
+from gsgeo.solve.linalg import FloatArray
 from gsgeo.store.base import Store, Transaction
 from gsgeo.store.records import (
     CheckPointRecord,
@@ -614,7 +615,7 @@ class Projects:
 
 def check_points_in_grid(cps: list[CheckPointRecord], project: Project,
                          crs: str | None = None, data_dir: Path | None = None,
-                         height_hint: np.ndarray | None = None) -> np.ndarray:
+                         height_hint: FloatArray | None = None) -> FloatArray:
     """(M, 3) easting, northing, height of check points in the project's grid (or ``crs``):
     gsgeo.measure.checkpoints.check_points_in_grid with the project's settings."""
     xyz = np.array([[c.x, c.y, np.nan if c.z is None else c.z] for c in cps],
