@@ -28,6 +28,17 @@ CLEAN = [
     "tiles/placement.py",
     "tiles/reader.py", "tiles/splats.py", "tiles/spz.py", "tiles/swap.py", "tiles/workers.py",
     "demo/build.py", "demo/place.py", "demo/project.py", "demo/scene.py", "demo/splats.py",
+    "jsontypes.py", "session.py", "commands/solve.py",
+    "measure/__init__.py", "measure/accuracy.py", "measure/checkpoints.py", "measure/features.py",
+    "measure/point.py", "measure/rays.py", "measure/schema.py",
+    "service/__init__.py", "service/checkpoints.py", "service/exporting.py", "service/measuring.py",
+    "service/points.py", "service/projects.py", "service/validate.py",
+    "store/__init__.py", "store/base.py", "store/migrations.py", "store/records.py", "store/sqlite.py",
+    "server/__init__.py", "server/api.py", "server/app.py", "server/faults.py", "server/files.py",
+    "server/guard.py", "server/hosts.py", "server/intersect_pool.py", "server/models.py",
+    "server/routing.py", "server/scenes.py",
+    "export/__init__.py", "export/arrow.py", "export/atomic.py", "export/csvfile.py", "export/geojson.py",
+    "export/gpkg.py", "export/tables.py", "export/wkb.py", "export/writer.py",
 ]
 
 ERROR = re.compile(r"^gsgeo/(?P<path>[^:]+):(?P<line>\d+): error: (?P<message>.*)$", re.M)
