@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Half size of the ground square (m).
 GROUND_HALF = 20.0
@@ -75,7 +76,7 @@ class ValidationPoint:
     description: str
 
 
-def _unit(v) -> tuple[float, float, float]:
+def _unit(v: ArrayLike) -> tuple[float, float, float]:
     v = np.asarray(v, float)
     x, y, z = (float(c) for c in v / np.linalg.norm(v))
     return (x, y, z)

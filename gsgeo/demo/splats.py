@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gsgeo.demo import scene
 
@@ -52,7 +53,7 @@ class Part:
                       for f in ("positions", "sigmas", "axes", "rgb", "alpha")))
 
 
-def _flat(points: np.ndarray, t1, t2, step: float, rgb: np.ndarray, thin: float = 0.002,
+def _flat(points: np.ndarray, t1: ArrayLike, t2: ArrayLike, step: float, rgb: np.ndarray, thin: float = 0.002,
           alpha: float = 0.97) -> Part:
     """Flat splats at points (N, 3) lying in the plane spanned by unit t1, t2."""
     n = len(points)
@@ -177,7 +178,8 @@ def _building(rng: np.random.Generator) -> Part:
     return Part.concatenate(parts)
 
 
-def _cylinder(a, b, radius: float, around: int, step: float, rgb, rng: np.random.Generator,
+def _cylinder(a: ArrayLike, b: ArrayLike, radius: float, around: int, step: float,
+              rgb: ArrayLike, rng: np.random.Generator,
               cap: bool = True) -> Part:
     """Splats on the side of a cylinder (axis a -> b) and on its top cap at b."""
     a, b = np.asarray(a, float), np.asarray(b, float)
@@ -236,7 +238,8 @@ def _sculpture(rng: np.random.Generator) -> Part:
     parts = []
     stone = np.array([0.86, 0.84, 0.80])
 
-    def quad(p00, p10, p01, top_fn=None):
+    def quad(p00: np.ndarray, p10: np.ndarray, p01: np.ndarray,
+             top_fn: object = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Samples of the parallelogram p00 + s (p10 - p00) + t (p01 - p00)."""
         e1, e2 = p10 - p00, p01 - p00
         l1, l2 = np.linalg.norm(e1), np.linalg.norm(e2)

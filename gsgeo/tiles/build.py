@@ -32,7 +32,7 @@ from gsgeo.tiles import outdir as outdir_mod
 from gsgeo.tiles.georef import Georeference
 from gsgeo.tiles.placement import Placement
 from gsgeo.tiles.source import Source, open_source
-from gsgeo.tiles.workers import cpu_count, pool, shared_empty
+from gsgeo.tiles.workers import Imap, cpu_count, pool, shared_empty
 
 #: Splats per task of the quantising pass: small enough that a block's temporaries stay in
 #: the CPU caches, large enough that numpy's per-call overhead is small.
@@ -303,7 +303,7 @@ def _write_tile(task: tuple[int, str, int, int, int, str]) -> int:
     return int(rows.shape[0])
 
 
-def build_tree(tree: lod.TreeInput, imap, nproc: int, max_splats: int,
+def build_tree(tree: lod.TreeInput, imap: Imap, nproc: int, max_splats: int,
                 parent_splats: int | None, tree2: lod.TreeInput | None = None,
                 order: np.ndarray | None = None) -> tuple[lod.Node, int]:
     """The tile tree and which tree columns hold it (0: ``tree``, 1: ``tree2``).
@@ -396,8 +396,11 @@ def build_tileset(input_path: str | os.PathLike, outdir: str | os.PathLike,
                       on_start=on_start)
 
 
-def _build(input_path, outdir, georef, *, max_splats, parent_splats, spz_version, level,
-           workers, overwrite, progress, block, on_start) -> Summary:
+def _build(input_path: str | os.PathLike, outdir: str | os.PathLike,
+           georef: Georeference | None, *, max_splats: int, parent_splats: int | None,
+           spz_version: int, level: int, workers: int | None, overwrite: bool,
+           progress: TextIO | None, block: int,
+           on_start: Callable[[], None] | None) -> Summary:
     global WORKER_JOB
     t0 = time.monotonic()
     src_path = Path(input_path)

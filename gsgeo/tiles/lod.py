@@ -11,6 +11,7 @@ its children; a node with at most ``max_splats`` is a leaf holding all of them. 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,7 +42,7 @@ class Node:
             return 0.0
         return float(np.linalg.norm(self.hi - self.lo)) * ERROR_PER_DIAGONAL
 
-    def walk(self):
+    def walk(self) -> Iterator[Node]:
         yield self
         for c in self.children:
             yield from c.walk()

@@ -20,9 +20,10 @@ import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
+from typing import BinaryIO, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from gsgeo.errors import InputError
 from gsgeo.tiles.splats import SH_C0, SH_DEGREE_OF, Splats
@@ -69,7 +70,8 @@ def field_names(dtype: np.dtype) -> tuple[str, ...]:
     return dtype.names or ()
 
 
-def _compressed_layout(path, fmt, elements, header_end) -> CompressedLayout:
+def _compressed_layout(path: Path, fmt: str, elements: list[tuple[str, int, list[tuple[str, str]]]],
+                       header_end: int) -> CompressedLayout:
     if fmt != "binary_little_endian":
         raise InputError(f"{path}: a compressed PLY must be binary little endian")
     offs, els = {}, {}
@@ -121,7 +123,7 @@ def _unorm(v: np.ndarray, shift: int, bits: int) -> np.ndarray:
 
 
 def _lerp3(chunks: np.ndarray, ci: np.ndarray, names: list[str], packed: np.ndarray,
-           layout=((21, 11), (11, 10), (0, 11))) -> np.ndarray:
+           layout: tuple[tuple[int, int], ...] = ((21, 11), (11, 10), (0, 11))) -> np.ndarray:
     out = np.empty((packed.shape[0], 3), np.float32)
     for i, (shift, bits) in enumerate(layout):
         t = _unorm(packed, shift, bits)
@@ -131,7 +133,10 @@ def _lerp3(chunks: np.ndarray, ci: np.ndarray, names: list[str], packed: np.ndar
     return out
 
 
-def _compressed_maps(layout: CompressedLayout):
+CompressedMaps = tuple[np.ndarray, np.ndarray, "np.ndarray | None"]
+
+
+def _compressed_maps(layout: CompressedLayout) -> CompressedMaps:
     chunks = np.fromfile(layout.path, layout.chunk_dtype, layout.n_chunks,
                          offset=layout.chunk_offset)
     vert = np.memmap(layout.path, layout.vertex_dtype, "r", layout.vertex_offset,
@@ -141,7 +146,8 @@ def _compressed_maps(layout: CompressedLayout):
     return chunks, vert, sh_all
 
 
-def read_compressed(layout: CompressedLayout, start: int, stop: int, maps=None) -> Splats:
+def read_compressed(layout: CompressedLayout, start: int, stop: int,
+                    maps: CompressedMaps | None = None) -> Splats:
     """Splats [start, stop) of a compressed PLY (``maps`` from a previous call may be reused)."""
     chunks, vert, sh_all = maps or _compressed_maps(layout)
     v = np.array(vert[start:stop])
@@ -171,8 +177,9 @@ def read_compressed(layout: CompressedLayout, start: int, stop: int, maps=None) 
     opacities = np.log(alpha) - np.log1p(-alpha)
     k = layout.n_rest // 3
     if k:
-        b = np.array(sh_all[start:start + n]).view(np.uint8).reshape(n, layout.n_rest)
-        # n_rest > 0 only with an sh element, whose dtype the layout then holds
+        # n_rest > 0 only with an sh element, whose map and dtype are then there
+        sh_map = cast(np.ndarray, sh_all)
+        b = np.array(sh_map[start:start + n]).view(np.uint8).reshape(n, layout.n_rest)
         sh_names = field_names(cast(np.dtype, layout.sh_dtype))
         b = b[:, np.array([sh_names.index(f"f_rest_{i}") for i in range(layout.n_rest)])]
         nrm = (b.astype(np.float32) + np.float32(0.5)) / np.float32(256)
@@ -225,7 +232,7 @@ MAX_HEADER_BYTES = 1 << 20
 _FORMATS = ("binary_little_endian", "binary_big_endian", "ascii")
 
 
-def _header_elements(path: Path, f) -> tuple[str, list[tuple[str, int, list[tuple[str, str]]]]]:
+def _header_elements(path: Path, f: BinaryIO) -> tuple[str, list[tuple[str, int, list[tuple[str, str]]]]]:
     """Parse a PLY header from after its magic line: (format, [(element, count, [(property,
     type or "list")])]). Every malformed line is an InputError naming it."""
     fmt = None
@@ -356,14 +363,14 @@ def records_to_splats(rec: np.ndarray, layout: PlyLayout) -> Splats:
         # the usual all-float32 layout: one 2-D view, columns gathered in one go each
         mat = rec.view(rec.dtype[0]).reshape(n, len(names))
 
-        def cols(sel: list[str], dt=np.float32) -> np.ndarray:
+        def cols(sel: list[str], dt: npt.DTypeLike = np.float32) -> np.ndarray:
             ix = [names.index(s) for s in sel]
             if ix == list(range(ix[0], ix[0] + len(ix))):
                 # a view when the type matches (each block has its own buffer)
                 return mat[:, ix[0]:ix[0] + len(ix)].astype(dt, copy=False)
             return mat[:, ix].astype(dt, copy=False)
     else:
-        def cols(sel: list[str], dt=np.float32) -> np.ndarray:
+        def cols(sel: list[str], dt: npt.DTypeLike = np.float32) -> np.ndarray:
             out = np.empty((n, len(sel)), dt)
             for i, name in enumerate(sel):
                 out[:, i] = rec[name]

@@ -54,7 +54,7 @@ class _BinaryPly(Source):
         uniform = all(dt[i] == np.dtype("<f4") for i in range(len(ply.field_names(dt))))
         self._ones = np.ones(len(ply.field_names(dt)), np.float32) if uniform else None
 
-    def bounds(self):
+    def bounds(self) -> tuple[np.ndarray, np.ndarray, int]:
         lo, hi, n = ply.ply_bounds(self.layout, sample=CENTRE_SAMPLE)
         if n == 0:   # the sample may have missed the few finite ones: look at all
             lo, hi, n = ply.ply_bounds(self.layout)
@@ -87,7 +87,7 @@ class _InMemory(Source):
         self.splats = splats
         self.count, self.sh_degree, self.size_bytes = splats.count, sh_degree, size_bytes
 
-    def bounds(self):
+    def bounds(self) -> tuple[np.ndarray, np.ndarray, int]:
         p = self.splats.positions
         p = p[np.isfinite(p).all(axis=1)]
         if not p.size:
@@ -104,7 +104,7 @@ class _CompressedPly(Source):
         self.count, self.sh_degree, self.size_bytes = layout.count, layout.sh_degree, \
             layout.size_bytes
 
-    def bounds(self):
+    def bounds(self) -> tuple[np.ndarray, np.ndarray, int]:
         return ply.compressed_bounds(self.layout)
 
     def read(self, start: int, stop: int) -> Splats:

@@ -19,6 +19,7 @@ import struct
 import zlib
 from dataclasses import dataclass
 from types import ModuleType
+from typing import Protocol
 
 import numpy as np
 
@@ -54,7 +55,7 @@ class SpzBytes:
     def count(self) -> int:
         return int(self.positions.shape[0])
 
-    def take(self, idx) -> SpzBytes:
+    def take(self, idx: np.ndarray | slice) -> SpzBytes:
         if isinstance(idx, slice):
             return SpzBytes(self.positions[idx], self.alphas[idx], self.colors[idx],
                             self.scales[idx], self.rotations[idx], self.sh[idx])
@@ -249,7 +250,13 @@ def quantize(s: Splats, version: int = 3, out: SpzBytes | None = None) -> SpzByt
     return out
 
 
-def compressor(level: int):
+class Compressor(Protocol):
+    """A gzip compressobj (zlib's or ISA-L's)."""
+    def compress(self, data: memoryview, /) -> bytes: ...
+    def flush(self) -> bytes: ...
+
+
+def compressor(level: int) -> Compressor:
     """A gzip compressobj: ISA-L for levels 0-3 when available, else zlib (levels 0-9)."""
     if _isal is not None and level <= 3:
         return _isal.compressobj(level, _isal.DEFLATED, 31)
@@ -307,7 +314,7 @@ def pack_bounded(b: SpzBytes, sh_degree: int, *, version: int = 3, fractional_bi
         o += size
     comp = compressor(level)
     scale = 1.0 / (1 << fractional_bits)
-    return comp.compress(raw) + comp.flush(), lo * scale, hi * scale
+    return comp.compress(raw.data) + comp.flush(), lo * scale, hi * scale
 
 
 def decode(data: bytes) -> tuple[Splats, dict]:

@@ -26,6 +26,7 @@ import os
 import re
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 #: renameat2 flag: swap the two paths atomically (linux/fs.h).
@@ -116,7 +117,7 @@ def make_temp(outdir: Path) -> Path:
     return Path(tempfile.mkdtemp(prefix=prefix, suffix=".tmp", dir=outdir.parent))
 
 
-def _renameat2():
+def _renameat2() -> Callable[..., int] | None:
     try:
         fn = ctypes.CDLL(None, use_errno=True).renameat2
     except (OSError, AttributeError):   # not glibc >= 2.28 / not Linux

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form, geodetic_to_ecef_closed_form
 from gsgeo.crs.modelmatrix import apply_directions, apply_points, invert_affine, matrix4
@@ -239,18 +240,18 @@ class Tileset:
     def root_transform(self) -> np.ndarray:
         return self.root.transform
 
-    def to_ecef(self, points_local, tile: Tile | None = None) -> np.ndarray:
+    def to_ecef(self, points_local: ArrayLike, tile: Tile | None = None) -> np.ndarray:
         """Tileset-local (tile frame, z-up) points (..., 3) -> georeferenced ECEF."""
         return apply_points((tile or self.root).transform, points_local)
 
-    def from_ecef(self, points_ecef, tile: Tile | None = None) -> np.ndarray:
+    def from_ecef(self, points_ecef: ArrayLike, tile: Tile | None = None) -> np.ndarray:
         """Georeferenced ECEF points (..., 3) -> tileset-local (tile frame)."""
         return apply_points(invert_affine((tile or self.root).transform), points_ecef)
 
-    def directions_to_ecef(self, d_local, tile: Tile | None = None) -> np.ndarray:
+    def directions_to_ecef(self, d_local: ArrayLike, tile: Tile | None = None) -> np.ndarray:
         return apply_directions((tile or self.root).transform, d_local)
 
-    def directions_from_ecef(self, d_ecef, tile: Tile | None = None) -> np.ndarray:
+    def directions_from_ecef(self, d_ecef: ArrayLike, tile: Tile | None = None) -> np.ndarray:
         return apply_directions(invert_affine((tile or self.root).transform), d_ecef)
 
     def up_turn(self, tile: Tile) -> np.ndarray:

@@ -15,11 +15,13 @@ import os
 import signal
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 
-def shared_empty(shape: tuple[int, ...] | int, dtype) -> np.ndarray:
+def shared_empty(shape: tuple[int, ...] | int, dtype: npt.DTypeLike) -> np.ndarray:
     """An uninitialised array in anonymous shared memory: writes by forked workers are seen
     by the parent (and the pages are returned to the system when the array is freed)."""
     shape = (shape,) if isinstance(shape, int) else tuple(shape)
@@ -80,7 +82,7 @@ class WorkerFailed(Exception):
     """A non-Exception (e.g. KeyboardInterrupt, SystemExit) escaped a task in a worker."""
 
 
-def _guarded(fn_and_task):
+def _guarded(fn_and_task: tuple[Callable[[Any], Any], Any]) -> Any:
     fn, task = fn_and_task
     try:
         return fn(task)
@@ -94,7 +96,7 @@ class Imap:
     """``imap(fn, tasks)``: results in completion order; ``close()`` says no more tasks will
     come, so the workers exit (and the kernel frees their memory) while the caller goes on."""
 
-    def __init__(self, p=None) -> None:
+    def __init__(self, p: multiprocessing.pool.Pool | None = None) -> None:
         self._pool = p
 
     def __call__(self, fn: Callable, tasks: Iterable) -> Iterator:
