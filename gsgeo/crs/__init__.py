@@ -8,6 +8,7 @@ Importing the package alone loads no PROJ, so gsgeo.crs.ellipsoid (numpy only) i
 """
 
 from importlib import import_module
+from typing import Any
 
 # Names are loaded on first use (PEP 562): importing one submodule, e.g. gsgeo.crs.frames for
 # `gsgeo tiles`, then does not load PROJ and everything grid output needs.
@@ -21,7 +22,7 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     if name in _WHERE:
         value = getattr(import_module(f"gsgeo.crs.{_WHERE[name]}"), name)
         globals()[name] = value

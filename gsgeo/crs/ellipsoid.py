@@ -17,13 +17,14 @@ Degrees for latitude and longitude, metres for heights and coordinates.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: WGS 84 semi-major axis (m) and flattening.
 WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563
 
 
-def enu_rotation(lon_deg, lat_deg) -> np.ndarray:
+def enu_rotation(lon_deg: ArrayLike, lat_deg: ArrayLike) -> np.ndarray:
     """Rotation(s) ECEF -> ENU at geodetic longitude, latitude in degrees (that order, as
     everywhere in gsgeo), shape (..., 3, 3), rows east, north, up: v_enu = R v_ecef.
 
@@ -40,7 +41,8 @@ def enu_rotation(lon_deg, lat_deg) -> np.ndarray:
     ], axis=-2)
 
 
-def geodetic_to_ecef_closed_form(lon, lat, h, a: float = WGS84_A, f: float = WGS84_F) -> np.ndarray:
+def geodetic_to_ecef_closed_form(lon: ArrayLike, lat: ArrayLike, h: ArrayLike, a: float = WGS84_A,
+                                 f: float = WGS84_F) -> np.ndarray:
     """ECEF (..., 3) in metres of longitude, latitude (degrees) and ellipsoidal height (m)."""
     lam = np.radians(np.asarray(lon, dtype=np.float64))
     phi = np.radians(np.asarray(lat, dtype=np.float64))
@@ -52,7 +54,7 @@ def geodetic_to_ecef_closed_form(lon, lat, h, a: float = WGS84_A, f: float = WGS
                      (n * (1.0 - e2) + h) * sp], axis=-1)
 
 
-def ecef_to_geodetic_closed_form(xyz, a: float = WGS84_A, f: float = WGS84_F
+def ecef_to_geodetic_closed_form(xyz: ArrayLike, a: float = WGS84_A, f: float = WGS84_F
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Longitude, latitude (degrees) and ellipsoidal height (m) of ECEF points (..., 3).
 

@@ -16,6 +16,7 @@ the closed-form WGS 84 formulas that need no PROJ are
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gsgeo.crs.ellipsoid import enu_rotation  # noqa: F401  (part of this module's interface)
 from gsgeo.crs.resolve import source_crs
@@ -23,14 +24,14 @@ from gsgeo.crs.transformers import pipeline, transformer
 from gsgeo.errors import InputError
 
 
-def _rotate(r: np.ndarray, v) -> np.ndarray:
+def _rotate(r: np.ndarray, v: ArrayLike) -> np.ndarray:
     """r (3, 3) applied to vectors (..., 3); (r @ v.T).T is ~20x faster than v @ r.T here."""
     a = np.asarray(v, dtype=np.float64)
     flat = a.reshape(-1, 3)
     return np.ascontiguousarray((r @ flat.T).T).reshape(a.shape)
 
 
-def ecef_to_geodetic(xyz, source: str = "EPSG:4978") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def ecef_to_geodetic(xyz: ArrayLike, source: str = "EPSG:4978") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Longitude, latitude (degrees) and ellipsoidal height (m) on the source CRS's datum."""
     p = np.asarray(xyz, dtype=np.float64)
     src = source_crs(source)
@@ -39,7 +40,7 @@ def ecef_to_geodetic(xyz, source: str = "EPSG:4978") -> tuple[np.ndarray, np.nda
     return np.asarray(lon), np.asarray(lat), np.asarray(h)
 
 
-def geodetic_to_ecef(lon, lat, h, source: str = "EPSG:4978") -> np.ndarray:
+def geodetic_to_ecef(lon: ArrayLike, lat: ArrayLike, h: ArrayLike, source: str = "EPSG:4978") -> np.ndarray:
     """ECEF (m) of longitude, latitude (degrees) and ellipsoidal height (m) on the source datum."""
     src = source_crs(source)
     t = transformer(src.geographic_3d_id, src.id)
@@ -48,7 +49,8 @@ def geodetic_to_ecef(lon, lat, h, source: str = "EPSG:4978") -> np.ndarray:
     return np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], axis=-1)
 
 
-def geodetic_jacobian(lat_deg, h, a: float, f: float) -> tuple[np.ndarray, np.ndarray]:
+def geodetic_jacobian(lat_deg: ArrayLike, h: np.ndarray | float, a: float,
+                      f: float) -> tuple[np.ndarray, np.ndarray]:
     """Radii factors of d(lon, lat)/d(east, north) in radians per metre at latitude, height.
 
     Returns (1 / ((N + h) cos lat), 1 / (M + h)): dlon = e . dX / ((N + h) cos lat),
@@ -73,7 +75,7 @@ class EnuFrame:
         frame's axes.
     """
 
-    def __init__(self, origin_ecef, source: str = "EPSG:4978") -> None:
+    def __init__(self, origin_ecef: ArrayLike, source: str = "EPSG:4978") -> None:
         o = np.asarray(origin_ecef, dtype=np.float64).reshape(-1)
         if o.shape != (3,) or not np.all(np.isfinite(o)):
             raise InputError("an ENU origin must be 3 finite ECEF coordinates in metres")
@@ -95,34 +97,34 @@ class EnuFrame:
         """Frame at longitude, latitude (degrees) and ellipsoidal height (m) on the source datum."""
         return cls(geodetic_to_ecef(lon, lat, h, source), source)
 
-    def to_enu(self, points_ecef) -> np.ndarray:
+    def to_enu(self, points_ecef: ArrayLike) -> np.ndarray:
         """ECEF points (..., 3) -> ENU (..., 3), metres, through PROJ's topocentric conversion."""
         p = np.asarray(points_ecef, dtype=np.float64)
         t = pipeline(self._definition)
         e, n, u = t.transform(p[..., 0], p[..., 1], p[..., 2], errcheck=False)
         return np.stack([np.asarray(e), np.asarray(n), np.asarray(u)], axis=-1)
 
-    def to_ecef(self, points_enu) -> np.ndarray:
+    def to_ecef(self, points_enu: ArrayLike) -> np.ndarray:
         """ENU points (..., 3) -> ECEF (..., 3), metres."""
         p = np.asarray(points_enu, dtype=np.float64)
         t = pipeline(self._definition)
         x, y, z = t.transform(p[..., 0], p[..., 1], p[..., 2], direction="INVERSE", errcheck=False)
         return np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], axis=-1)
 
-    def directions_to_enu(self, d_ecef) -> np.ndarray:
+    def directions_to_enu(self, d_ecef: ArrayLike) -> np.ndarray:
         """Direction vectors (..., 3) ECEF -> ENU (rotation only; lengths kept)."""
         return _rotate(self.rotation, d_ecef)
 
-    def directions_to_ecef(self, d_enu) -> np.ndarray:
+    def directions_to_ecef(self, d_enu: ArrayLike) -> np.ndarray:
         """Direction vectors (..., 3) ENU -> ECEF (rotation only; lengths kept)."""
         return _rotate(self.rotation.T, d_enu)
 
-    def covariance_to_ecef(self, cov_enu) -> np.ndarray:
+    def covariance_to_ecef(self, cov_enu: ArrayLike) -> np.ndarray:
         """Covariance(s) (..., 3, 3) ENU -> ECEF: R^T C R (m^2)."""
         r = self.rotation
         return r.T @ np.asarray(cov_enu, dtype=np.float64) @ r
 
-    def covariance_to_enu(self, cov_ecef) -> np.ndarray:
+    def covariance_to_enu(self, cov_ecef: ArrayLike) -> np.ndarray:
         """Covariance(s) (..., 3, 3) ECEF -> ENU: R C R^T (m^2)."""
         r = self.rotation
         return r @ np.asarray(cov_ecef, dtype=np.float64) @ r.T

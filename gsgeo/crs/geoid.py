@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gsgeo.errors import DatumError, InputError
 
@@ -45,7 +46,7 @@ class GeoidGrid:
     def label(self) -> str:
         return f"geoid grid {self.name}"
 
-    def sample(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+    def sample(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Undulation N and its 1-sigma (0 when not stated) at raster-CRS coordinates x, y.
 
         Raises DatumError for points outside the grid or on no-data cells.

@@ -33,14 +33,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gsgeo.crs.confidence import ellipse_95, ellipsoid_axes_95
 from gsgeo.crs.frames import ecef_to_geodetic, enu_rotation, geodetic_jacobian
 from gsgeo.crs.geoid import load_geoid
-from gsgeo.crs.resolve import GridCRS, grid_crs, source_crs
+from gsgeo.crs.resolve import GridCRS, SourceCRS, grid_crs, source_crs
 from gsgeo.crs.transformers import (
+    Candidates,
     accuracy_m,
     candidates,
     choose,
@@ -51,6 +54,9 @@ from gsgeo.crs.transformers import (
     transformer,
 )
 from gsgeo.errors import CRSError, DatumError, InputError
+
+if TYPE_CHECKING:
+    from pyproj import Transformer
 
 #: Step of the differences in longitude and latitude, degrees (~0.1 m on the ground: small
 #: against the curvature, large against float rounding of 1e6 m coordinates).
@@ -127,7 +133,9 @@ class GridPoint:
     warnings: list[str] = field(default_factory=list)
 
     @classmethod
-    def build(cls, e, n, h, cov, crs, height_type, vdatum, op, acc, lon, lat, hw, he, warnings):
+    def build(cls, e: float, n: float, h: float, cov: np.ndarray | None, crs: str,
+              height_type: str, vdatum: str, op: str, acc: float | None, lon: float,
+              lat: float, hw: float, he: float, warnings: list[str]) -> GridPoint:
         if cov is None:
             s: tuple[float | None, float | None, float | None] = (None, None, None)
             ell: tuple[float | None, float | None, float | None] = (None, None, None)
@@ -149,7 +157,7 @@ class GridPoint:
         return out
 
 
-def to_grid(point_ecef, cov_ecef, crs: str, *, vertical: str | None = None,
+def to_grid(point_ecef: ArrayLike, cov_ecef: ArrayLike | None, crs: str, *, vertical: str | None = None,
             geoid: str | Path | None = None, source_crs: str = "EPSG:4978") -> GridPoint:
     """One ECEF point (3,) and its covariance (3, 3) (m, m^2) into a grid CRS.
 
@@ -169,7 +177,7 @@ def to_grid(point_ecef, cov_ecef, crs: str, *, vertical: str | None = None,
     return to_grid_many(p, c, crs, vertical=vertical, geoid=geoid, source_crs=source_crs).point(0)
 
 
-def to_grid_many(points_ecef, cov_ecef, crs: str, *, vertical: str | None = None,
+def to_grid_many(points_ecef: ArrayLike, cov_ecef: ArrayLike | None, crs: str, *, vertical: str | None = None,
                  geoid: str | Path | None = None, source_crs: str = "EPSG:4978") -> GridPoints:
     """`to_grid` for M points at once: points (M, 3), covariances (M, 3, 3) or None.
 
@@ -268,7 +276,8 @@ def to_grid_many(points_ecef, cov_ecef, crs: str, *, vertical: str | None = None
     )
 
 
-def full_jacobian(j_llh: np.ndarray, lon, lat, h, a: float, f: float) -> np.ndarray:
+def full_jacobian(j_llh: np.ndarray, lon: ArrayLike, lat: ArrayLike, h: np.ndarray | float, a: float,
+                  f: float) -> np.ndarray:
     """d(E, N, h)/d(X, Y, Z) (M, 3, 3), metres per metre.
 
     j_llh: d(E, N)/d(lon, lat, h) (M, 2, 3), metres per radian and per metre; chained with
@@ -284,7 +293,7 @@ def full_jacobian(j_llh: np.ndarray, lon, lat, h, a: float, f: float) -> np.ndar
     return jac
 
 
-def analytic_jacobian(points_ecef, crs: str, source_crs: str = "EPSG:4978") -> np.ndarray:
+def analytic_jacobian(points_ecef: ArrayLike, crs: str, source_crs: str = "EPSG:4978") -> np.ndarray:
     """d(E, N, h)/d(X, Y, Z) from the projection's point scale factor and meridian convergence.
 
     Where meridians and parallels stay perpendicular on the map (conformal projections, and
@@ -321,7 +330,9 @@ def analytic_jacobian(points_ecef, crs: str, source_crs: str = "EPSG:4978") -> n
     return jac
 
 
-def _heights(src, g: GridCRS, lon, lat, h, geoid, crs_text):
+def _heights(src: SourceCRS, g: GridCRS, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
+             geoid: str | Path | None, crs_text: str
+             ) -> tuple[np.ndarray, str, str, np.ndarray | None, str | None, float | None]:
     """(height, height_type, vertical_datum, extra variance, vertical op, its accuracy)."""
     ell_name = src.geographic_3d.ellipsoid.name if src.geographic_3d.ellipsoid else "?"
     if g.vertical is None and geoid is None:
@@ -363,7 +374,7 @@ def _heights(src, g: GridCRS, lon, lat, h, geoid, crs_text):
             t.description, accuracy_m(t))
 
 
-def _missing_grid_message(g: GridCRS, cands, comp: str) -> str:
+def _missing_grid_message(g: GridCRS, cands: Candidates, comp: str) -> str:
     missing: list[list[str]] = []
     for op in cands.unavailable:
         if "ballpark vertical" in op.name.lower():
@@ -392,7 +403,8 @@ def _missing_grid_message(g: GridCRS, cands, comp: str) -> str:
     ).replace("`projsync --file NAME`", f"`projsync --file {grids.split(' and ')[0]}`")
 
 
-def _area_warnings(warnings, g: GridCRS, t2, lon, lat, inside_op) -> None:
+def _area_warnings(warnings: list[str], g: GridCRS, t2: Transformer, lon: np.ndarray,
+                   lat: np.ndarray, inside_op: bool) -> None:
     a = g.horizontal.area_of_use
     if a is not None:
         w, s, e, n = a.west, a.south, a.east, a.north
@@ -412,12 +424,12 @@ def _area_warnings(warnings, g: GridCRS, t2, lon, lat, inside_op) -> None:
         )
 
 
-def _en(t, lon, lat, h) -> tuple[np.ndarray, np.ndarray]:
+def _en(t: Transformer, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     x, y, _ = t.transform(lon, lat, h, errcheck=False)
     return np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
 
 
-def _centroid(lon, lat) -> tuple[float, float]:
+def _centroid(lon: np.ndarray, lat: np.ndarray) -> tuple[float, float]:
     # Points of a call belong to one scene; the mean is a fine representative.
     return float(np.mean(lon)), float(np.mean(lat))
 
@@ -433,5 +445,5 @@ def _compound_id(g: GridCRS) -> str:
                        [g.horizontal, g.vertical]).to_wkt()
 
 
-def _source(text: str):
+def _source(text: str) -> SourceCRS:
     return source_crs(text or "EPSG:4978")

@@ -11,14 +11,17 @@ caller warn.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gsgeo.errors import InputError
 
 IDENTITY = np.eye(4)
 
 
-def matrix4(m16) -> np.ndarray:
+def matrix4(m16: ArrayLike) -> np.ndarray:
     """4 x 4 matrix from 16 numbers in column-major order (3D Tiles, glTF, CesiumJS)."""
     if m16 is None:
         return IDENTITY.copy()
@@ -48,13 +51,13 @@ def invert_affine(m: np.ndarray) -> np.ndarray:
     return inv
 
 
-def apply_points(m: np.ndarray, p) -> np.ndarray:
+def apply_points(m: np.ndarray, p: ArrayLike) -> np.ndarray:
     """Affine matrix (4, 4) applied to points (..., 3)."""
     p = np.asarray(p, dtype=np.float64)
     return p @ m[:3, :3].T + m[:3, 3]
 
 
-def apply_directions(m: np.ndarray, d, normalise: bool = True) -> np.ndarray:
+def apply_directions(m: np.ndarray, d: ArrayLike, normalise: bool = True) -> np.ndarray:
     """Linear part of m applied to direction vectors (..., 3), unit length if `normalise`."""
     out = np.asarray(d, dtype=np.float64) @ m[:3, :3].T
     if normalise:
@@ -70,7 +73,9 @@ def is_similarity(m: np.ndarray, tol: float = 1e-6) -> bool:
     return bool(s > 0 and np.abs(g - s * np.eye(3)).max() <= tol * s)
 
 
-def rendered_to_georeferenced(origins, directions, model_matrices) -> tuple[np.ndarray, np.ndarray, bool]:
+def rendered_to_georeferenced(origins: ArrayLike, directions: ArrayLike,
+                              model_matrices: Iterable[ArrayLike | None]
+                              ) -> tuple[np.ndarray, np.ndarray, bool]:
     """Rays in rendered ECEF -> georeferenced ECEF, each ray with its own modelMatrix.
 
     origins, directions : (N, 3); model_matrices : sequence of N matrices ((4, 4), 16 numbers
