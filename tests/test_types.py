@@ -28,6 +28,8 @@ CLEAN = [
     "tiles/placement.py",
     "tiles/reader.py", "tiles/splats.py", "tiles/spz.py", "tiles/swap.py", "tiles/workers.py",
     "demo/build.py", "demo/place.py", "demo/project.py", "demo/scene.py", "demo/splats.py",
+    "tiles/__init__.py", "tiles/build.py", "tiles/ply.py", "tiles/source.py", "tiles/tileset.py",
+    "demo/__init__.py", "pointschema.py",
     "jsontypes.py", "session.py", "commands/solve.py",
     "measure/__init__.py", "measure/accuracy.py", "measure/checkpoints.py", "measure/features.py",
     "measure/point.py", "measure/rays.py", "measure/schema.py",
