@@ -173,6 +173,14 @@ def _measurement_columns(ms: list) -> dict[str, Any] | None:
     out.update((k, sf[:, i]) for i, k in enumerate(("sigma0", "max_angle_deg", "rms_m")))
     mf = _floats(ms, ("lon", "lat", "h_wgs84"))
     out.update((k, mf[:, i]) for i, k in enumerate(("lon", "lat", "h_wgs84")))
+    meas = list(map(attrgetter("sigma_meas"), ms))
+    for k in ("sigma_e_meas", "sigma_n_meas", "sigma_h_meas"):
+        out[k] = out[k.removesuffix("_meas")].copy()
+    if set(map(type, meas)) != {type(None)}:  # some points carry a georeference's uncertainty
+        have = np.flatnonzero([v is not None for v in meas])
+        sm = np.array([meas[i] for i in have], dtype=np.float64).reshape(-1, 3)
+        for i, k in enumerate(("sigma_e_meas", "sigma_n_meas", "sigma_h_meas")):
+            out[k][have] = sm[:, i]
     out["n_rays"] = n_all - n_excl
     out["max_residual_px"] = max_px
     for k, (a, b) in {"cov_ee": (0, 0), "cov_en": (0, 1), "cov_eh": (0, 2), "cov_nn": (1, 1),

@@ -2,7 +2,8 @@
 
 rendered ECEF rays --(inverse of each ray's modelMatrix)--> georeferenced ECEF
 --(pyproj topocentric at a provisional point)--> local ENU --gsgeo.solve.intersect-->
-point and covariance in ENU --> ECEF (R^T C R) --to_grid--> E, N, H with covariance.
+point and covariance in ENU --> ECEF (R^T C R) [+ the georeference's own uncertainty, when the
+settings carry one: the total covariance] --to_grid--> E, N, H with covariance.
 
 The ENU origin is the provisional intersection in ECEF, so the solved point sits within
 millimetres of the origin and the ENU solution is well conditioned.
@@ -16,7 +17,7 @@ import numpy as np
 
 from gsgeo import limits
 from gsgeo.crs.frames import EnuFrame
-from gsgeo.crs.grid import to_grid, to_grid_many
+from gsgeo.crs.grid import to_grid_many
 from gsgeo.crs.modelmatrix import rendered_to_georeferenced
 from gsgeo.crs.resolve import grid_crs
 from gsgeo.crs.resolve import source_crs as resolve_source
@@ -122,12 +123,20 @@ def measure_point(
             f"ray(s) {', '.join(str(i + 1) for i in np.flatnonzero(mask))} excluded by request"
         )
 
+    frame_cov = None if settings.frame is None else settings.frame.point_covariance(point_ecef)
+    cov_total = cov_ecef if frame_cov is None else cov_ecef + frame_cov
     grid = None
     origins_grid = None
+    sigma_meas = None
     if crs:
-        grid = to_grid(point_ecef, cov_ecef, crs, vertical=vertical, geoid=geoid,
-                       source_crs=src.id)
+        gp = to_grid_many(point_ecef.reshape(1, 3), cov_total.reshape(1, 3, 3), crs,
+                          vertical=vertical, geoid=geoid, source_crs=src.id)
+        grid = gp.point(0)
         warnings += grid.warnings
+        if frame_cov is not None and grid.covariance is not None:
+            j = gp.jacobian[0]
+            meas = grid.covariance - j @ frame_cov @ j.T  # the grid covariance is linear in C
+            sigma_meas = np.sqrt(np.clip(np.diag(meas), 0.0, None))
         lon, lat, h84 = grid.lon, grid.lat, grid.h_wgs84
         try:
             gm = to_grid_many(o, None, crs, vertical=vertical, geoid=geoid, source_crs=src.id)
@@ -147,6 +156,8 @@ def measure_point(
         enu_origin_ecef=frame.origin_ecef,
         point_ecef=point_ecef,
         cov_ecef=cov_ecef,
+        cov_ecef_total=None if frame_cov is None else cov_total,
+        sigma_meas=sigma_meas,
         grid=grid,
         ray_origins_ecef=o,
         ray_directions_ecef=d,

@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike
 from gsgeo import limits
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSON, JSONObject
+from gsgeo.measure.framecov import FrameCovariance
 from gsgeo.solve.linalg import FloatArray
 
 #: The session-JSON members of a ray, in the order they are written.
@@ -184,13 +185,14 @@ class SolveSettings:
     geoid: str | Path | None = None
     source_crs: str = "EPSG:4978"
     sigma_px: float = 1.0
+    frame: FrameCovariance | None = None
 
     @classmethod
     def parse(cls, *, crs: str | None = None, vertical: str | None = None,
               geoid: str | Path | None = None, source_crs: str | None = None,
-              sigma_px: JSON = 1.0) -> SolveSettings:
+              sigma_px: JSON = 1.0, frame: FrameCovariance | None = None) -> SolveSettings:
         """Settings with sigma_px within gsgeo.limits and an empty source_crs meaning
         EPSG:4978; InputError names the field. The CRSs are parsed where they are used."""
         return cls(crs=crs or None, vertical=vertical or None, geoid=geoid or None,
                    source_crs=source_crs or "EPSG:4978",
-                   sigma_px=limits.sigma_px(sigma_px, "sigma_px"))
+                   sigma_px=limits.sigma_px(sigma_px, "sigma_px"), frame=frame)

@@ -36,8 +36,8 @@ class Measurement:
     solution: IntersectionResult  # in the local ENU frame
     enu_origin_ecef: FloatArray  # (3,)
     point_ecef: FloatArray  # (3,) georeferenced ECEF on source_crs, m
-    cov_ecef: FloatArray  # (3, 3) m^2
-    grid: GridPoint | None
+    cov_ecef: FloatArray  # (3, 3) m^2, the aiming alone (measurement-only)
+    grid: GridPoint | None  # its covariance is the total (cov_ecef_total when given)
     ray_origins_ecef: FloatArray  # (N, 3) georeferenced
     ray_directions_ecef: FloatArray  # (N, 3) georeferenced, unit
     ray_origins_grid: FloatArray | None  # (N, 3) E, N, H of the camera centres
@@ -52,6 +52,10 @@ class Measurement:
     lat: float | None = None
     h_wgs84: float | None = None
     warnings: list[str] = field(default_factory=list)
+    # with a georeference's uncertainty: (3, 3) ECEF total covariance, m^2, and the
+    # measurement-only grid sigmas (E, N, H), m; None when the frame is taken as exact
+    cov_ecef_total: FloatArray | None = None
+    sigma_meas: FloatArray | None = None
 
     @property
     def n_rays(self) -> int:
@@ -79,6 +83,12 @@ class Measurement:
                 ellipse_bearing_deg=g.ellipse_bearing_deg, operation=g.operation,
                 operation_accuracy_m=g.operation_accuracy_m,
             )
+            if self.sigma_meas is None:
+                rec.update(sigma_e_meas=g.sigma_e, sigma_n_meas=g.sigma_n, sigma_h_meas=g.sigma_h)
+            else:
+                rec.update(sigma_e_meas=float(self.sigma_meas[0]),
+                           sigma_n_meas=float(self.sigma_meas[1]),
+                           sigma_h_meas=float(self.sigma_meas[2]))
             c = g.covariance  # a measured point's grid point always carries one
             if c is not None:
                 rec.update(
@@ -111,6 +121,8 @@ class Measurement:
                                     else self.grid.ellipsoid_axes_95.tolist())
         out["point_ecef"] = self.point_ecef.tolist()
         out["cov_ecef"] = self.cov_ecef.tolist()
+        out["cov_ecef_total"] = (self.cov_ecef.tolist() if self.cov_ecef_total is None
+                                 else self.cov_ecef_total.tolist())
         out["enu"] = {
             "origin_ecef": self.enu_origin_ecef.tolist(),
             "point": self.solution.point.tolist(),
