@@ -158,6 +158,10 @@ class CheckPointIn(BaseModel):
     x: Finite = Field(description="easting (or longitude)")
     y: Finite = Field(description="northing (or latitude)")
     z: Finite | None = Field(None, description="height; omitted when unknown")
+    sigma_h: Annotated[float, Field(gt=0, le=1e4)] | None = Field(
+        None, description="stated 1-sigma horizontal precision, metres")
+    sigma_v: Annotated[float, Field(gt=0, le=1e4)] | None = Field(
+        None, description="stated 1-sigma vertical precision, metres")
 
 
 class CheckPointsCreate(BaseModel):

@@ -32,6 +32,8 @@ ID_COLUMNS = ("point_id", "id", "name", "label")
 X_COLUMNS = ("easting", "e", "x", "lon", "longitude")
 Y_COLUMNS = ("northing", "n", "y", "lat", "latitude")
 Z_COLUMNS = ("height", "h", "z", "elevation", "alt", "h_wgs84")
+SIGMA_H_COLUMNS = ("sigma_h", "sigma_horizontal", "sigma_en", "sigma_xy")
+SIGMA_V_COLUMNS = ("sigma_v", "sigma_vertical", "sigma_z")
 FORMATS = ("csv", "geojson", "gpkg")
 MAX_CHECK_POINTS = 100_000
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -39,10 +41,29 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 
 @dataclass
 class CheckPointRow:
+    """One point of a file: id, coordinates in the file's CRS, stated sigmas (m) or None."""
+
     id: str
     x: float
     y: float
     z: float | None
+    sigma_h: float | None = None
+    sigma_v: float | None = None
+
+
+def _sigma(value: JSON, field: str) -> float | None:
+    """A stated precision: empty/None, or a positive number of metres."""
+    v = _num(value, field, True)
+    if v is not None and not v > 0:
+        raise InputError("a precision (sigma) must be a positive number of metres", field=field)
+    return v
+
+
+def _sigmas(get: dict[str, JSON], names: Sequence[str], at: str) -> tuple[float | None, float | None]:
+    """(sigma_h, sigma_v) of one row given as {column: value}."""
+    ch, cv = _pick(names, SIGMA_H_COLUMNS), _pick(names, SIGMA_V_COLUMNS)
+    return (None if ch is None else _sigma(get.get(ch), f"{at}, column {ch}"),
+            None if cv is None else _sigma(get.get(cv), f"{at}, column {cv}"))
 
 
 def format_from_name(filename: str | None) -> str | None:
@@ -121,7 +142,8 @@ def _read_csv(data: bytes) -> list[CheckPointRow]:
                 item_id(r.get(cid), f"{at}, column {cid}"),
                 _num(r.get(cx), f"{at}, column {cx}"),
                 _num(r.get(cy), f"{at}, column {cy}"),
-                _num(r.get(cz), f"{at}, column {cz}", True) if cz else None))
+                _num(r.get(cz), f"{at}, column {cz}", True) if cz else None,
+                *_sigmas(dict(r), cols, at)))
             _count(rows)
     except csv.Error as exc:
         limit = csv.field_size_limit()
@@ -171,7 +193,8 @@ def _read_geojson(data: bytes) -> list[CheckPointRow]:
             _feature_id(props, f.get("id"), at),
             _num(c[0], f"{at}.geometry.coordinates[0]"),
             _num(c[1], f"{at}.geometry.coordinates[1]"),
-            _num(c[2], f"{at}.geometry.coordinates[2]", True) if len(c) == 3 else None))
+            _num(c[2], f"{at}.geometry.coordinates[2]", True) if len(c) == 3 else None,
+            *_sigmas(props, list(props), f"{at}.properties")))
     return rows
 
 
@@ -208,6 +231,8 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
     except Exception as exc:  # GDAL and GEOS raise their own error types for unreadable files
         raise InputError(f"cannot be read as a GeoPackage: {exc}") from None
     ids = columns[names.index(cid)]
+    sig_cols = [c for c in (_pick(names, SIGMA_H_COLUMNS), _pick(names, SIGMA_V_COLUMNS)) if c]
+    sig = {c: columns[names.index(c)] for c in sig_cols}
     rows: list[CheckPointRow] = []
     for i, (pid, geom) in enumerate(zip(ids, geoms, strict=True)):
         at = f"layer {layer} feature {i}"
@@ -218,7 +243,9 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
         rows.append(CheckPointRow(item_id(pid, f"{at}, column {cid}"),
                                   _num(float(geom.x), f"{at} x"),
                                   _num(float(geom.y), f"{at} y"),
-                                  _num(None if z is None else float(z), f"{at} z", True)))
+                                  _num(None if z is None else float(z), f"{at} z", True),
+                                  *_sigmas({c: _plain(v[i]) for c, v in sig.items()}, sig_cols,
+                                           at)))
         _count(rows)
     crs = None
     if meta.get("crs"):
@@ -229,6 +256,12 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
         except CRSError as exc:
             raise InputError(f"the layer's CRS cannot be read: {exc}") from None
     return rows, crs
+
+
+def _plain(value: object) -> JSON:
+    """A GeoPackage field value (numpy scalar) as a plain JSON number or text."""
+    v = value.item() if hasattr(value, "item") else value
+    return v if isinstance(v, (int, float, str)) or v is None else str(v)
 
 
 def _rows(data: bytes, fmt: str) -> tuple[list[CheckPointRow], str | None]:

@@ -539,7 +539,8 @@ class Projects:
         except CRSError as exc:
             raise exc.within("crs") from None
         recs = [CheckPointRecord(project_id=pid, id=r.id, x=r.x, y=r.y, z=r.z, crs=crs.strip(),
-                                 role=role, source=_text(source, "source", 300)) for r in rows]
+                                 role=role, source=_text(source, "source", 300),
+                                 sigma_h=r.sigma_h, sigma_v=r.sigma_v) for r in rows]
         with self.store.transaction() as tx:
             self._project(tx, pid)
             if replace:

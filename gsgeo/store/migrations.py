@@ -95,6 +95,14 @@ MIGRATIONS: list[str] = [
     ALTER TABLE points_v2 RENAME TO points;
     CREATE INDEX points_seq ON points(project_id, seq);
     """,
+    # 3: ray provenance (the scene georeference a point's rays were taken under, JSON
+    # {"version", "root_transform"}; NULL: the scene's frame as it was before any change) and
+    # the stated precision of control and check points (metres, 1 sigma; NULL: not stated)
+    """
+    ALTER TABLE points ADD COLUMN frame TEXT CHECK (frame IS NULL OR json_valid(frame));
+    ALTER TABLE check_points ADD COLUMN sigma_h REAL CHECK (sigma_h IS NULL OR sigma_h > 0);
+    ALTER TABLE check_points ADD COLUMN sigma_v REAL CHECK (sigma_v IS NULL OR sigma_v > 0);
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

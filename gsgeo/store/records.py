@@ -69,6 +69,9 @@ class PointRecord:
     seq: int = 0  # creation order
     created_at: str = ""
     updated_at: str = ""
+    # The scene georeference the rays were taken under: {"version": int, "root_transform":
+    # 16 numbers column-major}; None: the scene's frame before its first georeference change.
+    frame: JSONObject | None = None
 
     def __post_init__(self) -> None:
         if self.record is None and self.result is not None:
@@ -107,3 +110,5 @@ class CheckPointRecord:
     role: str = "check"
     source: str = ""
     created_at: str = ""
+    sigma_h: float | None = None  # stated 1-sigma horizontal precision, metres (None: not stated)
+    sigma_v: float | None = None  # stated 1-sigma vertical precision, metres

@@ -117,7 +117,8 @@ class SQLiteTransaction(Transaction):
                            rays=json.loads(row["rays"]), excluded=json.loads(row["excluded"]),
                            result=_loads(row["result"]),
                            error=row["error"], solved_rev=row["solved_rev"],
-                           created_at=row["created_at"], updated_at=row["updated_at"])
+                           created_at=row["created_at"], updated_at=row["updated_at"],
+                           frame=_loads(row["frame"]))
 
     def list_points(self, pid: str) -> list[PointRecord]:
         rows = self._all("SELECT * FROM points WHERE project_id = ? ORDER BY seq", (pid,))
@@ -137,12 +138,12 @@ class SQLiteTransaction(Transaction):
                                (p.project_id,))
         self._insert(
             "INSERT INTO points (project_id, id, seq, code, description, rays, excluded, result,"
-            " error, solved_rev, created_at, updated_at)"
-            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            " error, solved_rev, created_at, updated_at, frame)"
+            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (p.project_id, p.id, p.seq, p.code, p.description, _dumps(p.rays),
              _dumps(p.excluded), None if p.result is None else _dumps(p.result),
              p.error, p.solved_rev,
-             p.created_at, p.updated_at),
+             p.created_at, p.updated_at, None if p.frame is None else _dumps(p.frame)),
             f"point '{p.id}'",
         )
 
@@ -151,11 +152,12 @@ class SQLiteTransaction(Transaction):
         try:
             self.con.execute(
                 "UPDATE points SET id=?, code=?, description=?, rays=?, excluded=?, result=?,"
-                " error=?, solved_rev=?, updated_at=? WHERE project_id=? AND id=?",
+                " error=?, solved_rev=?, updated_at=?, frame=? WHERE project_id=? AND id=?",
                 (p.id, p.code, p.description, _dumps(p.rays), _dumps(p.excluded),
                  None if p.result is None else _dumps(p.result),
                  p.error, p.solved_rev,
-                 p.updated_at, p.project_id, old_id or p.id),
+                 p.updated_at, None if p.frame is None else _dumps(p.frame),
+                 p.project_id, old_id or p.id),
             )
         except sqlite3.IntegrityError as exc:
             if "UNIQUE" in str(exc) or "PRIMARY KEY" in str(exc):
@@ -220,16 +222,19 @@ class SQLiteTransaction(Transaction):
         rows = self._all("SELECT * FROM check_points WHERE project_id = ? ORDER BY id", (pid,))
         return [CheckPointRecord(project_id=r["project_id"], id=r["id"], x=r["x"], y=r["y"],
                                  z=r["z"], crs=r["crs"], role=r["role"], source=r["source"],
-                                 created_at=r["created_at"]) for r in rows]
+                                 created_at=r["created_at"], sigma_h=r["sigma_h"],
+                                 sigma_v=r["sigma_v"]) for r in rows]
 
     def upsert_check_points(self, records: list[CheckPointRecord]) -> None:
         t = now_iso()
         self.con.executemany(
-            "INSERT INTO check_points (project_id, id, x, y, z, crs, role, source, created_at)"
-            " VALUES (?,?,?,?,?,?,?,?,?) ON CONFLICT (project_id, id) DO UPDATE SET"
-            " x=excluded.x, y=excluded.y, z=excluded.z, crs=excluded.crs, role=excluded.role,"
-            " source=excluded.source, created_at=excluded.created_at",
-            [(c.project_id, c.id, c.x, c.y, c.z, c.crs, c.role, c.source, t) for c in records],
+            "INSERT INTO check_points (project_id, id, x, y, z, crs, role, source, created_at,"
+            " sigma_h, sigma_v) VALUES (?,?,?,?,?,?,?,?,?,?,?) ON CONFLICT (project_id, id)"
+            " DO UPDATE SET x=excluded.x, y=excluded.y, z=excluded.z, crs=excluded.crs,"
+            " role=excluded.role, source=excluded.source, created_at=excluded.created_at,"
+            " sigma_h=excluded.sigma_h, sigma_v=excluded.sigma_v",
+            [(c.project_id, c.id, c.x, c.y, c.z, c.crs, c.role, c.source, t, c.sigma_h,
+              c.sigma_v) for c in records],
         )
 
     def delete_check_point(self, pid: str, cid: str) -> bool:
