@@ -71,7 +71,7 @@ def offenders(source: str, forbidden: tuple[str, ...], allowed: tuple[str, ...] 
 
 
 LAYERS = ("gsgeo.solve", "gsgeo.crs", "gsgeo.measure", "gsgeo.session", "gsgeo.export",
-          "gsgeo.tiles", "gsgeo.store", "gsgeo.service", "gsgeo.server", "gsgeo.commands",
+          "gsgeo.georef", "gsgeo.tiles", "gsgeo.store", "gsgeo.service", "gsgeo.server", "gsgeo.commands",
           "gsgeo.demo", "gsgeo.cli")
 
 
@@ -90,6 +90,13 @@ def test_measure_imports_nothing_above_it():
     assert offenders("gsgeo.measure", ("gsgeo.session", "gsgeo.store", "gsgeo.export",
                                        "gsgeo.server", "gsgeo.service", "gsgeo.commands",
                                        "gsgeo.cli")) == []
+
+
+def test_georef_imports_nothing_above_it():
+    """gsgeo.georef sits beside export: it uses solve, crs and measure, never the service."""
+    assert offenders("gsgeo.georef", ("gsgeo.session", "gsgeo.store", "gsgeo.export",
+                                      "gsgeo.tiles", "gsgeo.server", "gsgeo.service",
+                                      "gsgeo.commands", "gsgeo.demo", "gsgeo.cli")) == []
 
 
 def test_store_is_persistence_only():

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from gsgeo import limits
+from gsgeo.crs.modelmatrix import rendered_to_georeferenced
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure.framecov import FrameCovariance
@@ -155,6 +156,19 @@ class Rays:
                 "others have one; give ifov on every ray (angular model) or on none (unweighted "
                 "model)", field=f"rays[{int(missing[0])}].ifov")
         return self.ifov
+
+    def mapped(self, similarity: ArrayLike) -> Rays:
+        """These rays carried by a similarity (4, 4; ECEF -> ECEF, y = s R x + t), e.g. into a
+        scene's new georeference: each ray's modelMatrix is undone first (georeferenced
+        ECEF), origins map as points, directions by R (unit length); ifov, pixels and
+        viewports stay (angles are kept). The result has no model matrices."""
+        s = np.asarray(similarity, dtype=np.float64).reshape(4, 4)
+        o, d, _ = rendered_to_georeferenced(self.origins, self.directions,
+                                            [self.model_matrix(i) for i in range(len(self))])
+        lin = s[:3, :3]
+        d2 = d @ lin.T
+        d2 /= np.linalg.norm(d2, axis=1, keepdims=True)
+        return Rays(o @ lin.T + s[:3, 3], d2, self.ifov, self.pixels, self.viewports, None)
 
     def to_json(self) -> list[JSONObject]:
         """The session-JSON ray objects (README, "Session JSON"), members only where given."""

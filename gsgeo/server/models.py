@@ -112,11 +112,15 @@ class PointCreate(BaseModel):
     description: Text = ""
     rays: Rays
     excluded: Annotated[list[RayIndex], Field(max_length=1000)] = Field(default_factory=list)
+    georef_version: Annotated[int, Field(ge=0, le=1_000_000)] | None = Field(
+        None, description="the scene georeference version the rays were taken under "
+                          "(tileset extras.gsgeo.georef.version); the current one when absent")
 
     def to_input(self) -> PointInput:
         """The point to store (typed rays)."""
         return PointInput(rays=rays_of(self.rays), id=self.id, code=self.code,
-                          description=self.description, excluded=list(self.excluded))
+                          description=self.description, excluded=list(self.excluded),
+                          georef_version=self.georef_version)
 
 
 class PointPatch(BaseModel):

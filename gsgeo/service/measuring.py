@@ -15,6 +15,7 @@ from typing import Any
 from gsgeo.errors import CRSError, InputError
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, Rays, SolveSettings, measure_point
+from gsgeo.measure.framecov import FrameCovariance
 from gsgeo.measure.schema import record_of
 from gsgeo.session import parse_rays
 
@@ -66,20 +67,22 @@ def find_geoid(geoid: str | None, data_dir: Path | None) -> Path | None:
     return path
 
 
-def solve_settings(settings: JSONObject, data_dir: Path | None) -> SolveSettings:
+def solve_settings(settings: JSONObject, data_dir: Path | None,
+                   frame: FrameCovariance | None = None) -> SolveSettings:
     """A project's settings (checked by gsgeo.service.projects.validate_settings) as the typed
-    core's, the geoid looked up in DATA/geoids/."""
+    core's, the geoid looked up in DATA/geoids/, ``frame`` the scene georeference's
+    uncertainty."""
     return SolveSettings(crs=settings.get("crs"), vertical=settings.get("vertical"),
                          geoid=find_geoid(settings.get("geoid"), data_dir),
                          source_crs=settings.get("source_crs") or "EPSG:4978",
-                         sigma_px=float(settings.get("sigma_px") or 1.0))
+                         sigma_px=float(settings.get("sigma_px") or 1.0), frame=frame)
 
 
 def measure(rays: Rays, settings: JSONObject, excluded: list[int],
             data_dir: Path | None = None, *, point_id: str = "P", code: str = "",
-            description: str = "") -> Measurement:
+            description: str = "", frame: FrameCovariance | None = None) -> Measurement:
     """The gsgeo.measure.point Measurement of ``rays`` with a project's ``settings``."""
-    return measure_point(rays, solve_settings(settings, data_dir), point_id=point_id,
+    return measure_point(rays, solve_settings(settings, data_dir, frame), point_id=point_id,
                          code=code, description=description, exclude=excluded)
 
 

@@ -22,13 +22,15 @@ MAX_RAYS = 1000
 @dataclass(frozen=True)
 class PointInput:
     """A new point: ``rays`` (rendered ECEF), ``id`` (None: the next free P<n>), ``code``,
-    ``description`` and ``excluded`` 0-based ray indices left out of the solution."""
+    ``description``, ``excluded`` 0-based ray indices left out of the solution and
+    ``georef_version``, the scene georeference the rays were taken under (None: the current)."""
 
     rays: Rays
     id: str | None = None
     code: str = ""
     description: str = ""
     excluded: list[int] = field(default_factory=list)
+    georef_version: int | None = None
 
 
 def check_ray_count(n: int, field: str = "rays") -> None:
@@ -56,4 +58,15 @@ def point_input(doc: Mapping[str, Any]) -> PointInput:
     return PointInput(rays=rays_input(doc.get("rays")), id=doc.get("id"),
                       code="" if code is None else code,
                       description="" if description is None else description,
-                      excluded=list(doc.get("excluded") or []))
+                      excluded=list(doc.get("excluded") or []),
+                      georef_version=georef_version(doc.get("georef_version")))
+
+
+def georef_version(value: JSON, field: str = "georef_version") -> int | None:
+    """A scene georeference version: None or a non-negative integer."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise InputError("expected a non-negative integer (the tileset's "
+                         "extras.gsgeo.georef.version)", field=field)
+    return int(value)

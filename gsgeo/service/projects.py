@@ -14,24 +14,39 @@ from __future__ import annotations
 import math
 import re
 import secrets
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from gsgeo.crs.modelmatrix import column_major
 from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.georef.fit import georeference as fit_control
+from gsgeo.georef.scale import Distance, fit_scale, origin_of
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, Rays
 from gsgeo.measure.accuracy import accuracy_report
 from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
 from gsgeo.measure.rays import SolveSettings
 from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
+from gsgeo.service.georeferencing import (
+    SceneFrame,
+    frame_record,
+    measured_from,
+    rays_now,
+    reference_from,
+    restore_on_failure,
+    scene_frame,
+    scene_path,
+)
 from gsgeo.service.measuring import (
     check_excluded,
     find_geoid,
     json_ready,
     measure,
     measured_result,
+    solve_settings,
     stored_rays,
     with_record,
 )
@@ -47,6 +62,8 @@ from gsgeo.store.records import (
     PointRecord,
     Project,
 )
+from gsgeo.tiles.georefhistory import apply_similarity
+from gsgeo.tiles.georefhistory import undo as undo_scene
 
 SETTINGS = ("crs", "vertical", "geoid", "source_crs", "sigma_px")
 KINDS = {"line": 2, "polygon": 3}  # kind -> minimum number of points
@@ -226,8 +243,9 @@ class Projects:
             return p
 
     def _remeasure_all(self, tx: Transaction, p: Project) -> None:
+        ctx = scene_frame(self.data_dir, p.scene)
         for pt in tx.list_points(p.id):
-            self._measure_into(pt, p)
+            self._measure_into(pt, p, ctx=ctx)
             tx.update_point(pt)
 
     def delete_project(self, pid: str) -> None:
@@ -237,16 +255,20 @@ class Projects:
 
     # points ---------------------------------------------------------------------------
     def _measure_into(self, pt: PointRecord, p: Project, strict: bool = False,
-                      rays: Rays | None = None) -> None:
+                      rays: Rays | None = None, ctx: SceneFrame | None = None) -> None:
         """Measure ``pt`` with the settings of ``p``; on failure store the reason (or raise).
 
         ``rays``: the point's typed rays when the caller has them; otherwise its stored rays
-        are read.
+        are read. ``ctx``: the scene's current frame (read when not given); the rays are
+        carried from the frame they were taken under into it.
         """
+        ctx = ctx if ctx is not None else scene_frame(self.data_dir, p.scene)
         try:
             typed = rays if rays is not None else stored_rays(pt.rays)
+            typed = rays_now(typed, pt.frame, ctx)
             m = measure(typed, p.settings(), pt.excluded, self.data_dir, point_id=pt.id,
-                        code=pt.code, description=pt.description)
+                        code=pt.code, description=pt.description,
+                        frame=None if ctx is None else ctx.frame)
             pt.result = measured_result(m)
             pt.record = with_record(pt.result)
             pt.error = None
@@ -294,9 +316,11 @@ class Projects:
                 if tx.get_point(pid, point_id) is not None:
                     raise ConflictError(f"point '{point_id}' already exists in project '{pid}'",
                                         field="id")
+            ctx = scene_frame(self.data_dir, p.scene)
             pt = PointRecord(project_id=pid, id=point_id, rays=new.rays.to_json(), code=code,
-                             description=description, excluded=excluded)
-            self._measure_into(pt, p, strict=True, rays=new.rays)
+                             description=description, excluded=excluded,
+                             frame=frame_record(ctx, new.georef_version))
+            self._measure_into(pt, p, strict=True, rays=new.rays, ctx=ctx)
             tx.insert_point(pt)
             return pt
 
@@ -325,6 +349,7 @@ class Projects:
             if changes.get("rays") is not None:
                 typed = rays_input(changes["rays"])
                 pt.rays = typed.to_json()
+                pt.frame = frame_record(scene_frame(self.data_dir, p.scene))
                 pt.excluded = []
                 remeasure = True
             excluded = set(pt.excluded)
@@ -402,7 +427,8 @@ class Projects:
                                         field=f"{at}.id")
                 typed = sp.to_rays()
                 pt = PointRecord(project_id=pid, id=point_id, rays=typed.to_json(),
-                                 code=sp.code, description=sp.description)
+                                 code=sp.code, description=sp.description,
+                                 frame=frame_record(scene_frame(self.data_dir, p.scene)))
                 try:
                     self._measure_into(pt, p, strict=True, rays=typed)
                 except GsgeoError as exc:
@@ -515,6 +541,132 @@ class Projects:
         with self.store.transaction() as tx:
             self._feature(tx, pid, kind, fid)
             tx.delete_feature(pid, kind, fid)
+
+    # georeference ---------------------------------------------------------------------
+    def georeference_status(self, pid: str) -> JSONObject:
+        """The project's scene georeference (version, history, the applied fit) and its
+        control points with whether each is measured."""
+        with self.store.transaction(write=False) as tx:
+            p = self._project(tx, pid)
+            cps = [c for c in tx.list_check_points(pid) if c.role == "control"]
+            solved = {q.id for q in tx.list_points(pid) if q.result is not None}
+        ctx = scene_frame(self.data_dir, p.scene)
+        history = [] if ctx is None else [
+            {k: h.get(k) for k in ("version", "kind", "at", "parent", "restores",
+                                   "georeferenced")}
+            | {"scale": (h.get("summary") or {}).get("scale")} for h in ctx.state.history]
+        entry = None if ctx is None else ctx.state.entry()
+        return json_ready({
+            "scene": p.scene, "version": 0 if ctx is None else ctx.version,
+            "georeferenced": False if ctx is None else ctx.state.georeferenced,
+            "history": history,
+            "control": [{"id": c.id, "x": c.x, "y": c.y, "z": c.z, "crs": c.crs,
+                         "sigma_h": c.sigma_h, "sigma_v": c.sigma_v,
+                         "measured": c.id in solved} for c in cps],
+            "current": None if entry is None else entry.get("summary")})
+
+    def _georef_solution(self, tx: Transaction, p: Project, ctx: SceneFrame | None,
+                         exclude: Sequence[str],
+                         distances: Sequence[Distance] | None) -> tuple[Any, JSONObject]:
+        """(solution, report) of the project's control (or known distances) as stored."""
+        measured = measured_from(tx.list_points(p.id))
+        if distances is not None:
+            origin = origin_of(ctx.root) if ctx is not None else (
+                measured.ecef.mean(axis=0) if len(measured.ids) else np.zeros(3))
+            sol = fit_scale(measured, distances, origin)
+            return sol, sol.report
+        settings = solve_settings(p.settings(), self.data_dir)
+        gsol = fit_control(measured, reference_from(tx.list_check_points(p.id)), settings,
+                           exclude=exclude)
+        return gsol, gsol.report
+
+    def georeference(self, pid: str, *, exclude: Sequence[str] = (), apply: bool = False,
+                     accept_outliers: bool = False,
+                     distances: Sequence[Distance] | None = None) -> JSONObject:
+        """Fit the scene's georeference from the project's measured control (or, with
+        ``distances``, its scale alone) and, with ``apply``, write it into the scene's root
+        transform and re-measure every point of every project on that scene, all in one
+        transaction (the tileset is put back if the store cannot follow)."""
+        if not apply:
+            with self.store.transaction(write=False) as tx:
+                p = self._project(tx, pid)
+                _, report = self._georef_solution(tx, p, scene_frame(self.data_dir, p.scene),
+                                                  exclude, distances)
+            return json_ready(report)
+        written: tuple[Path, bytes] | None = None
+        try:
+            with self.store.transaction() as tx:
+                p = self._project(tx, pid)
+                path = scene_path(self.data_dir, p.scene)
+                ctx = scene_frame(self.data_dir, p.scene)
+                if path is None or ctx is None:
+                    raise InputError(f"project '{pid}' has no scene to apply a georeference to",
+                                     field="apply")
+                sol, report = self._georef_solution(tx, p, ctx, exclude, distances)
+                if report["outliers"] and not accept_outliers:
+                    raise InputError(
+                        f"control point(s) {', '.join(report['outliers'])} fail the blunder "
+                        "test; exclude them, or accept them explicitly (accept_outliers)",
+                        field="accept_outliers")
+                summary = dict(report) | {"exclude": list(exclude)}
+                before = path.read_bytes()
+                state = apply_similarity(path, sol.similarity.matrix(), kind=report["kind"],
+                                         frame_covariance=sol.frame.to_json(),
+                                         summary=json_ready(summary),
+                                         georeferenced=report["kind"] != "scale"
+                                         or ctx.state.georeferenced,
+                                         expect_version=ctx.version)
+                written = (path, before)
+                n = self._remeasure_scene(tx, p.scene, ctx)
+                report = dict(report) | {
+                    "applied": True, "remeasured_points": n,
+                    "scene": {"name": p.scene, "version": state.version,
+                              "root_transform": column_major(state.root_transform),
+                              "similarity": column_major(sol.similarity.matrix())}}
+        except BaseException as exc:
+            if written is not None:
+                restore_on_failure(*written, exc)
+            raise
+        return json_ready(report)
+
+    def undo_georeference(self, pid: str) -> JSONObject:
+        """Restore the scene's previous georeference and re-measure every project on it."""
+        written: tuple[Path, bytes] | None = None
+        try:
+            with self.store.transaction() as tx:
+                p = self._project(tx, pid)
+                path = scene_path(self.data_dir, p.scene)
+                ctx = scene_frame(self.data_dir, p.scene)
+                if path is None or ctx is None:
+                    raise InputError(f"project '{pid}' has no scene", field="scene")
+                before = path.read_bytes()
+                state, sim = undo_scene(path)
+                written = (path, before)
+                n = self._remeasure_scene(tx, p.scene, ctx)
+        except BaseException as exc:
+            if written is not None:
+                restore_on_failure(*written, exc)
+            raise
+        return json_ready({"version": state.version, "georeferenced": state.georeferenced,
+                           "root_transform": column_major(state.root_transform),
+                           "similarity": column_major(sim), "remeasured_points": n})
+
+    def _remeasure_scene(self, tx: Transaction, scene: str | None, before: SceneFrame) -> int:
+        """Re-measure every point of every project on ``scene`` in the scene's new frame;
+        points without a recorded frame are pinned to the one ``before`` the change."""
+        ctx = scene_frame(self.data_dir, scene)
+        pinned = {"version": before.version, "root_transform": column_major(before.root)}
+        n = 0
+        for q in tx.list_projects():
+            if q.scene != scene:
+                continue
+            for pt in tx.list_points(q.id):
+                if pt.frame is None:
+                    pt.frame = dict(pinned)
+                self._measure_into(pt, q, ctx=ctx)
+                tx.update_point(pt)
+                n += 1
+        return n
 
     # check points ---------------------------------------------------------------------
     def list_check_points(self, pid: str) -> list[CheckPointRecord]:

@@ -30,6 +30,7 @@ from gsgeo.errors import InputError
 from gsgeo.tiles import gltf, lod, spz, swap
 from gsgeo.tiles import outdir as outdir_mod
 from gsgeo.tiles.georef import Georeference
+from gsgeo.tiles.georefhistory import initial_extras
 from gsgeo.tiles.placement import Placement
 from gsgeo.tiles.source import Source, open_source
 from gsgeo.tiles.workers import Imap, cpu_count, pool, shared_empty
@@ -498,7 +499,8 @@ def _build(input_path: str | os.PathLike, outdir: str | os.PathLike,
                                {"gsgeo": {"georeference": summary.georeference,
                                           "operation": placement.operation,
                                           "splats": n, "sh_degree": sh_degree,
-                                          "root_frame": "ENU at the scene centre (WGS 84)"}})
+                                          "root_frame": "ENU at the scene centre (WGS 84)",
+                                          "georef": initial_extras(placement.root_transform)}})
             # again: OUTDIR may have been made or filled while the build ran
             outdir_mod.check_output(src_path, out, overwrite)
             _commit(tmp, dest)

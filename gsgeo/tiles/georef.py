@@ -192,7 +192,10 @@ class Georeference:
             self.warnings.append(
                 "no georeference given: the scene is placed as a local ENU frame at the "
                 f"default origin lat {DEFAULT_ORIGIN[0]}, lon {DEFAULT_ORIGIN[1]}, "
-                f"h {DEFAULT_ORIGIN[2]} m; measurements will not be on the Earth")
+                f"h {DEFAULT_ORIGIN[2]} m; measurements will not be on the Earth (nor in metres "
+                "if the scene's scale is arbitrary). Georeference it next: measure control "
+                "points in the viewer's Georeference panel or run `gsgeo georef --project PID "
+                "--apply`; `gsgeo georef --scale-only` fixes the scale alone")
         else:
             raise InputError(f"unknown georeference kind {self.kind!r}")
 

@@ -1,0 +1,146 @@
+"""Scene georeference for the project service: ray provenance, the fit from a project, apply.
+
+A project's points are measured in its scene's frame, which a georeference change moves
+(gsgeo.tiles.georefhistory). Each stored point keeps the frame its rays were taken under
+(``PointRecord.frame``: version and root transform); measuring maps its rays from that frame
+into the scene's current one, R_now R_then^-1 (a similarity, so ifov stays valid), and adds
+the current georeference's own uncertainty (gsgeo.measure.framecov). Rays themselves are never
+rewritten: nothing measured is lost, and an undo brings every point back exactly.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gsgeo.crs.modelmatrix import column_major, matrix4
+from gsgeo.errors import GsgeoError, InputError
+from gsgeo.georef.fit import Measured, Reference
+from gsgeo.jsontypes import JSON, JSONObject
+from gsgeo.measure import Rays
+from gsgeo.measure.framecov import FrameCovariance
+from gsgeo.solve.linalg import FloatArray
+from gsgeo.store.records import CheckPointRecord, PointRecord
+from gsgeo.tiles.georefhistory import SceneGeoref, read_scene_georef
+
+_lock = threading.Lock()
+_cache: dict[Path, tuple[tuple[int, int, int], SceneGeoref]] = {}
+
+
+@dataclass(frozen=True)
+class SceneFrame:
+    """The scene frame points are measured in now: version, root transform (4, 4) and the
+    georeference's uncertainty (None: taken as exact)."""
+
+    version: int
+    root: FloatArray
+    frame: FrameCovariance | None
+    state: SceneGeoref
+
+
+def scene_path(data_dir: Path | None, scene: str | None) -> Path | None:
+    """DATA/scenes/SCENE/tileset.json when both are known and it exists, else None."""
+    if data_dir is None or not scene:
+        return None
+    path = Path(data_dir) / "scenes" / scene / "tileset.json"
+    return path if path.is_file() else None
+
+
+def scene_frame(data_dir: Path | None, scene: str | None) -> SceneFrame | None:
+    """The current frame of a project's scene (cached on the file's identity and mtime)."""
+    path = scene_path(data_dir, scene)
+    if path is None:
+        return None
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    key = (st.st_ino, st.st_mtime_ns, st.st_size)
+    with _lock:
+        hit = _cache.get(path)
+    if hit is not None and hit[0] == key:
+        state = hit[1]
+    else:
+        state = read_scene_georef(path)
+        with _lock:
+            _cache[path] = (key, state)
+    frame = None if state.frame_covariance is None else \
+        FrameCovariance.from_json(state.frame_covariance)
+    return SceneFrame(state.version, state.root_transform, frame, state)
+
+
+def frame_record(ctx: SceneFrame | None, version: int | None = None) -> JSONObject | None:
+    """What a new point stores as its rays' frame: the scene's current version, or the
+    ``version`` the client says it took the rays under (InputError if the scene never had
+    it)."""
+    if ctx is None:
+        if version not in (None, 0):
+            raise InputError(f"the project has no scene with georeference version {version}",
+                             field="georef_version")
+        return None
+    v = ctx.version if version is None else int(version)
+    root = ctx.state.root_of(v)
+    if root is None:
+        raise InputError(f"the scene has no georeference version {v} (now {ctx.version})",
+                         field="georef_version")
+    return {"version": v, "root_transform": column_major(root)}
+
+
+def rays_now(rays: Rays, frame: JSONObject | None, ctx: SceneFrame | None) -> Rays:
+    """A point's rays carried from the frame they were taken under into the scene's current
+    one (unchanged when the frames agree or either is unknown)."""
+    if ctx is None or frame is None:
+        return rays
+    then = matrix4(frame.get("root_transform"))  # type: ignore[arg-type]
+    if np.array_equal(then, ctx.root):
+        return rays
+    return rays.mapped(ctx.root @ np.linalg.inv(then))
+
+
+def measured_from(points: Sequence[PointRecord]) -> Measured:
+    """The solved points' ECEF positions and measurement covariances (current frame)."""
+    ok = [q for q in points if q.result is not None and q.result.get("point_ecef") is not None]
+    ecef = np.array([q.result["point_ecef"] for q in ok if q.result is not None],
+                    dtype=float).reshape(-1, 3)
+    cov = np.array([q.result["cov_ecef"] for q in ok if q.result is not None],
+                   dtype=float).reshape(-1, 3, 3)
+    return Measured([q.id for q in ok], ecef, cov)
+
+
+def reference_from(cps: Sequence[CheckPointRecord]) -> Reference:
+    """Control and check records as the fit takes them."""
+    def num(v: float | None) -> float:
+        return np.nan if v is None else float(v)
+
+    return Reference(
+        ids=[c.id for c in cps],
+        xyz=np.array([[c.x, c.y, num(c.z)] for c in cps], dtype=float).reshape(-1, 3),
+        crss=[c.crs for c in cps],
+        sigma_h=np.array([num(c.sigma_h) for c in cps], dtype=float),
+        sigma_v=np.array([num(c.sigma_v) for c in cps], dtype=float),
+        roles=[c.role for c in cps])
+
+
+def exclude_ids(value: JSON, field: str = "exclude") -> list[str]:
+    """A list of control ids to leave out of the fit."""
+    if value is None:
+        return []
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise InputError("expected a list of control point ids", field=field)
+    return [str(v) for v in value]
+
+
+def restore_on_failure(path: Path, before: bytes, exc: BaseException) -> None:
+    """Put tileset.json back as it was when the store could not follow a georeference change
+    (the store's transaction is rolled back by the caller)."""
+    tmp = path.with_name(f".tileset.restore.{threading.get_ident()}.tmp")
+    try:
+        tmp.write_bytes(before)
+        tmp.replace(path)
+    except OSError as err:
+        raise GsgeoError(f"{path}: the georeference change failed ({exc}) and the previous "
+                         f"tileset.json could not be restored ({err})") from exc
