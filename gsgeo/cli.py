@@ -32,6 +32,7 @@ COMMANDS = {
     "crs": "gsgeo.commands.crs",
     "serve": "gsgeo.commands.serve",
     "demo": "gsgeo.commands.demo",
+    "georef": "gsgeo.commands.georef",
 }
 
 EXIT_USAGE = 2

@@ -359,6 +359,30 @@ def accuracy(pid: PID, request: Request,
     return svc(request).accuracy(pid, role)
 
 
+# georeference ----------------------------------------------------------------------------------
+@router.get("/projects/{pid}/georeference",
+            summary="The scene's georeference: version, history, the applied fit, control")
+def georeference_status(pid: PID, request: Request) -> dict[str, Any]:
+    return svc(request).georeference_status(pid)
+
+
+@router.post("/projects/{pid}/georeference",
+             summary="Fit the scene's georeference from the measured control (apply: write it)")
+def georeference(pid: PID, body: m.GeoreferenceRequest, request: Request) -> dict[str, Any]:
+    from gsgeo.georef.scale import Distance
+
+    distances = None if body.scale_only is None else [
+        Distance(d.from_, d.to, d.distance, d.sigma) for d in body.scale_only.distances]
+    return svc(request).georeference(pid, exclude=body.exclude, apply=body.apply,
+                                     accept_outliers=body.accept_outliers, distances=distances)
+
+
+@router.post("/projects/{pid}/georeference/undo",
+             summary="Restore the scene's previous georeference and re-measure its points")
+def undo_georeference(pid: PID, request: Request) -> dict[str, Any]:
+    return svc(request).undo_georeference(pid)
+
+
 # export ----------------------------------------------------------------------------------------
 @router.get("/projects/{pid}/export", summary="Download points, lines and polygons",
             response_class=FileResponse,

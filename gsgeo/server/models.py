@@ -174,3 +174,33 @@ class CheckPointsCreate(BaseModel):
     role: Literal["check", "control"] = "check"
     replace: bool = Field(False, description="drop the project's existing check points first")
     points: Annotated[list[CheckPointIn], Field(min_length=1, max_length=100000)]
+
+
+class DistanceIn(BaseModel):
+    """A known distance between two measured points (scale-only georeference)."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    from_: ItemId = Field(alias="from", description="first point id")
+    to: ItemId = Field(description="second point id")
+    distance: Annotated[float, Field(gt=0, le=1e7)] = Field(description="true distance, metres")
+    sigma: Annotated[float, Field(gt=0, le=1e4)] | None = Field(
+        None, description="its 1-sigma precision, metres")
+
+
+class ScaleOnly(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    distances: Annotated[list[DistanceIn], Field(min_length=1, max_length=1000)]
+
+
+class GeoreferenceRequest(BaseModel):
+    """Fit (and with ``apply`` write) the scene's georeference from the project's control."""
+
+    model_config = ConfigDict(extra="forbid")
+    exclude: Annotated[list[ItemId], Field(max_length=10000)] = Field(
+        default_factory=list, description="control point ids left out of the fit")
+    apply: bool = Field(False, description="write the fit into the scene's tileset.json and "
+                                           "re-measure every point on the scene")
+    accept_outliers: bool = Field(False, description="apply although control points fail "
+                                                     "the blunder test")
+    scale_only: ScaleOnly | None = Field(None, description="fix only the scene's scale from "
+                                                           "known distances")

@@ -77,7 +77,8 @@ def scene_info(scene_dir: Path) -> dict[str, Any]:
     info: dict[str, Any] = {"name": scene_dir.name,
                             "url": f"/scenes/{scene_dir.name}/tileset.json",
                             "origin": None, "bounds": None, "splat_count": None,
-                            "transform": None, "error": None}
+                            "transform": None, "georeferenced": None, "georef_version": None,
+                            "error": None}
     from gsgeo.crs.frames import ecef_to_geodetic
     from gsgeo.errors import GsgeoError
     from gsgeo.tiles.tileset import Tileset
@@ -90,6 +91,11 @@ def scene_info(scene_dir: Path) -> dict[str, Any]:
         if np.linalg.norm(t) > 1e6:  # a geocentric translation: the scene is georeferenced
             lon, lat, h = ecef_to_geodetic(t)
             info["origin"] = {"lon": float(lon), "lat": float(lat), "height": float(h)}
+        from gsgeo.tiles.georefhistory import read_scene_georef
+
+        state = read_scene_georef(ts)
+        info["georeferenced"] = state.georeferenced
+        info["georef_version"] = state.version
         info["bounds"] = _bounds(tileset)
         info["splat_count"] = _splat_count(scene_dir)
     except (GsgeoError, OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
