@@ -24,11 +24,14 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from gsgeo.demo import place, scene
 from gsgeo.demo import splats as demo_splats
 from gsgeo.errors import InputError
+
+if TYPE_CHECKING:
+    from gsgeo.tiles.georef import Georeference
 
 #: Bump when the geometry, the splats or the georeference change: older builds are rebuilt.
 VERSION = 1
@@ -57,7 +60,8 @@ def paths(data_dir: str | os.PathLike) -> dict[str, Path]:
             "truth": d / "demo" / "truth.json", "scene": d / "scenes" / SCENE_NAME}
 
 
-def _atomic_write(path: Path, text: str) -> None:
+def atomic_write(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to a temporary file beside ``path``, then rename it there."""
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
@@ -92,18 +96,16 @@ def checkpoints_csv_text(truth: list[place.TruthPoint]) -> str:
     return buf.getvalue()
 
 
-def _build_scene(ply: Path, out: Path, progress: TextIO | None) -> int:
-    """The scene of `gsgeo tiles PLY -o OUT --crs EPSG:27700 --offset E,N,H --height ellipsoidal`,
-    through the same Georeference and build_tileset the command uses; returns the tile count.
-    Warnings go to `progress` as the command prints them."""
+def build_scene(ply: Path, out: Path, georef: Georeference, progress: TextIO | None) -> int:
+    """The scene of `gsgeo tiles PLY -o OUT` with the options ``georef`` stands for, through
+    the same build_tileset the command uses; returns the tile count. Warnings go to
+    `progress` as the command prints them."""
     import numpy as np
 
     from gsgeo.tiles.build import build_tileset
-    from gsgeo.tiles.georef import Georeference
     from gsgeo.tiles.workers import keep_freed_memory
 
     keep_freed_memory()   # as `gsgeo tiles` does: the build's temporaries are reused
-    georef = Georeference.from_options(crs=place.CRS, offset=place.OFFSET, height="ellipsoidal")
 
     def warn(messages: list[str]) -> None:
         if progress is not None:
@@ -120,6 +122,13 @@ def _build_scene(ply: Path, out: Path, progress: TextIO | None) -> int:
                                 overwrite=True, progress=progress, on_start=started)
     warn(summary.warnings)
     return summary.tiles
+
+
+def grid_georeference() -> Georeference:
+    """The georeference of `gsgeo tiles --crs EPSG:27700 --offset E,N,H --height ellipsoidal`."""
+    from gsgeo.tiles.georef import Georeference
+
+    return Georeference.from_options(crs=place.CRS, offset=place.OFFSET, height="ellipsoidal")
 
 
 def build_demo(data_dir: str | os.PathLike, *, force: bool = False,
@@ -146,9 +155,9 @@ def build_demo(data_dir: str | os.PathLike, *, force: bool = False,
     n = demo_splats.write_ply(p["ply"], part)
     say(f"wrote {n:,} splats to {p['ply']}; converting with gsgeo tiles "
         f"--crs {place.CRS} --offset {','.join(f'{v:g}' for v in place.OFFSET)} ...")
-    tiles = _build_scene(p["ply"], p["scene"], progress)
+    tiles = build_scene(p["ply"], p["scene"], grid_georeference(), progress)
     truth = place.truth_points()
-    _atomic_write(p["csv"], checkpoints_csv_text(truth))
+    atomic_write(p["csv"], checkpoints_csv_text(truth))
     doc = {
         "version": VERSION,
         "place": place.PLACE,
@@ -164,7 +173,7 @@ def build_demo(data_dir: str | os.PathLike, *, force: bool = False,
         "points": [asdict(t) for t in truth],
         "subsets": list(scene.SUBSETS),
     }
-    _atomic_write(p["truth"], json.dumps(doc, indent=1))   # written last: marks the build done
+    atomic_write(p["truth"], json.dumps(doc, indent=1))   # written last: marks the build done
     say(f"scene {p['scene']} ({counted(tiles, 'tile')}) and {len(truth)} check "
         f"points in {time.monotonic() - t0:.1f} s")
     return DemoBuild(d, p["ply"], p["scene"], p["csv"], p["truth"], n, True,

@@ -1,4 +1,5 @@
-"""The demo project: the demo scene, EPSG:27700, and the ground truth as check points."""
+"""The demo projects: 'demo' (the demo scene, EPSG:27700, the ground truth as check points)
+and 'demo-local' (the local variant, its control and check points with stated sigmas)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ from pathlib import Path
 
 from gsgeo.demo import place
 from gsgeo.demo.build import SCENE_NAME, DemoBuild
+from gsgeo.demo.localbuild import SCENE_NAME as LOCAL_SCENE_NAME
+from gsgeo.demo.localbuild import LocalBuild
 from gsgeo.service import NotFoundError, Project, Projects, open_store
 from gsgeo.service.checkpoints import CheckPointRow
 
@@ -37,3 +40,35 @@ def ensure_project(data_dir: str | os.PathLike, build: DemoBuild) -> tuple[Proje
     finally:
         store.close()
     return project, n
+
+
+LOCAL_PROJECT_ID = "demo-local"
+LOCAL_PROJECT_NAME = "Demo, local frame: Parker's Piece before georeferencing"
+LOCAL_DESCRIPTION = ("The demo scene as a 3DGS trainer leaves it: in an arbitrary local frame "
+                     "(scaled, turned, shifted), not georeferenced (gsgeo demo --local). "
+                     "Georeference it with its six control points (G2, G3, G4, R1, T3, T4): "
+                     "measure each and name the point after it, then fit and apply in the "
+                     "Georeference panel; the other 14 markers are check points.")
+
+
+def ensure_local_project(data_dir: str | os.PathLike, build: LocalBuild) -> tuple[Project, int, int]:
+    """Create the project 'demo-local' on the local scene if it is missing (an existing one
+    keeps its points) and import the build's control file (role control) and check-point
+    file (role check), with their stated sigmas, as a user would (updated by id).
+    Returns (project, control, check)."""
+    store = open_store(Path(data_dir))
+    try:
+        projects = Projects(store, Path(data_dir))
+        try:
+            project = projects.get_project(LOCAL_PROJECT_ID)
+        except NotFoundError:
+            project = projects.create_project(name=LOCAL_PROJECT_NAME, id=LOCAL_PROJECT_ID,
+                                              description=LOCAL_DESCRIPTION,
+                                              scene=LOCAL_SCENE_NAME, crs=place.CRS, sigma_px=1.0)
+        counts = [projects.import_check_point_file(project.id, path.read_bytes(), path.name,
+                                                   crs=place.CRS, role=role)[0]
+                  for role, path in (("control", build.control_csv),
+                                     ("check", build.checkpoints_csv))]
+    finally:
+        store.close()
+    return project, counts[0], counts[1]
