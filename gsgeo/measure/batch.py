@@ -1,0 +1,629 @@
+"""Many points measured at once, point by point the same as :func:`gsgeo.measure.point.measure_point`.
+
+Re-solving every stored point after a georeference change must take well under a second for
+10 000 points, while the per-point pipeline costs about a millisecond a point (a few dozen
+small numpy and PROJ calls each). :func:`measure_batch` runs the same pipeline on arrays:
+
+- points are grouped by ray count and model (angular or unweighted); within a group the
+  provisional points, the per-point ENU frames (the closed-form rotation of
+  :func:`gsgeo.crs.ellipsoid.enu_rotation` at the origin's PROJ latitude and longitude: what
+  ``+proj=topocentric`` evaluates), the intersection (:func:`gsgeo.solve.core.solve_core`), the
+  global test and the data snooping of :mod:`gsgeo.solve.outliers` run over all points at once;
+- the grid coordinates of all points, and of all camera centres, come from a few
+  :func:`gsgeo.crs.grid.to_grid_many` calls. A call chooses its operations at the centroid of
+  its points, so points are grouped by which operations' areas of use contain them (a call is
+  split when its centroid would decide differently); a point outside the grid CRS's area of
+  use, or a call that fails, is transformed on its own, exactly as the single-point path does.
+
+Anything the fast path does not cover (excluded rays, a modelMatrix, ifov on some rays only,
+fewer than 2 rays, parallel rays, a point behind a camera, an unusable ENU origin) goes
+through ``measure_point`` itself, so errors and their messages are the same. The one field
+that may differ is ``solution.iterations`` (the batch solver reports its group's count).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from gsgeo import limits
+from gsgeo.crs.confidence import ellipse_95, ellipsoid_axes_95
+from gsgeo.crs.ellipsoid import enu_rotation
+from gsgeo.crs.frames import ecef_to_geodetic
+from gsgeo.crs.grid import GridPoint, GridPoints, to_grid_many
+from gsgeo.crs.resolve import SourceCRS, grid_crs
+from gsgeo.crs.resolve import source_crs as resolve_source
+from gsgeo.crs.transformers import candidates, transformer
+from gsgeo.errors import CRSError, GsgeoError
+from gsgeo.measure.point import measure_point, measure_points
+from gsgeo.measure.rays import Rays, SolveSettings
+from gsgeo.measure.schema import Measurement, MeasurementFailure, now_utc
+from gsgeo.solve import (
+    PARALLEL_LIMIT_DEG,
+    WEAK_GEOMETRY_DEG,
+    IntersectionResult,
+    intersection_angles,
+)
+from gsgeo.solve.core import CoreSolution, solve_core, unit_directions
+from gsgeo.solve.intersection import GLOBAL_TEST_ALPHA
+from gsgeo.solve.linalg import FloatArray, sym2_quadratic_inverse, sym3_inverse
+from gsgeo.solve.outliers import ALPHA, plane_bases
+from gsgeo.solve.stats import chi2_2_quantile, chi2_sf, f2_quantile
+
+#: One point to measure: id, code, description, its rays, 0-based indices of excluded rays.
+BatchPoint = tuple[str, str, str, Rays, Sequence[int]]
+#: Condition number of the provisional normal matrix above which its mean origin is used.
+PROVISIONAL_MAX_CONDITION = 1e12
+
+__all__ = ["BatchPoint", "measure_batch"]
+
+
+def measure_batch(points: Sequence[BatchPoint],
+                  settings: SolveSettings) -> list[Measurement | MeasurementFailure]:
+    """Measure every (id, code, description, rays, exclude) point with the same settings.
+
+    The result is, point by point, that of ``measure_point(rays, settings, point_id=id,
+    code=code, description=description, exclude=exclude)``, a GsgeoError becoming a
+    MeasurementFailure; the settings are checked first and a CRS problem of the whole set is
+    raised once, as :func:`gsgeo.measure.point.measure_points` does. Metres, m², ECEF on
+    ``settings.source_crs`` and the grid CRS's units, as there.
+    """
+    measure_points([], settings)  # the same up-front checks of the settings
+    results: list[Measurement | GsgeoError | None] = [None] * len(points)
+    s_px = _solver_sigma_px(settings.sigma_px)
+    groups: dict[tuple[int, bool], list[int]] = {}
+    slow: list[int] = []
+    for i, (_, _, _, rays, exclude) in enumerate(points):
+        n = len(rays)
+        if s_px is None or len(exclude) or rays.model_matrices is not None or n < 2:
+            slow.append(i)
+        else:  # ifov on some rays only is found in the group (measure_point's error)
+            groups.setdefault((n, rays.ifov is not None), []).append(i)
+    solved: list[_Solved] = []
+    for (n, angular), members in groups.items():
+        assert s_px is not None  # a point is grouped only with a usable sigma_px
+        group = _solve_group(points, members, n, angular, s_px, settings)
+        slow += group.fallback
+        if group.solved is not None:
+            solved.append(group.solved)
+    if solved:
+        _finish(points, _Solved.join(solved), settings, results)
+    for i in slow:
+        results[i] = _one(points[i], settings)
+    out: list[Measurement | MeasurementFailure] = []
+    crs_errors: list[CRSError] = []
+    for (pid, *_), res in zip(points, results, strict=True):
+        if isinstance(res, Measurement):
+            out.append(res)
+        else:
+            if isinstance(res, CRSError):
+                crs_errors.append(res)
+            out.append(MeasurementFailure(pid, str(res)))
+    if crs_errors and len(crs_errors) == len(out) and len({str(e) for e in crs_errors}) == 1:
+        raise crs_errors[0]
+    return out
+
+
+def _one(point: BatchPoint, settings: SolveSettings) -> Measurement | GsgeoError:
+    """The exact path: measure_point itself, its GsgeoError returned."""
+    pid, code, description, rays, exclude = point
+    try:
+        return measure_point(rays, settings, point_id=pid, code=code, description=description,
+                             exclude=exclude)
+    except GsgeoError as exc:
+        return exc
+
+
+def _solver_sigma_px(value: float) -> float | None:
+    """sigma_px as the solver checks it, or None when the solver would refuse it."""
+    try:
+        return limits.sigma_px(float(value), minimum=limits.SOLVER_SIGMA_PX_MIN)
+    except (GsgeoError, TypeError, ValueError, OverflowError):
+        return None
+
+
+@dataclass
+class _Solved:
+    """The ENU solutions of many points: arrays over the M points, and per-point ray arrays
+    (N differs between ray-count groups) as lists of rows."""
+
+    index: np.ndarray  # (M,) positions in the input
+    origin: FloatArray  # (M, 3) ENU origins, ECEF
+    rotation: FloatArray  # (M, 3, 3) ECEF -> ENU
+    point_enu: FloatArray  # (M, 3)
+    cov_enu: FloatArray  # (M, 3, 3)
+    sigma0: FloatArray
+    max_angle: FloatArray
+    condition: FloatArray
+    rms: FloatArray
+    dof: np.ndarray
+    camera_rows: FloatArray  # (sum of N, 3) every point's georeferenced ray origins in turn
+    counts: np.ndarray  # (M,) rays of each point
+    rays: dict[str, list[np.ndarray]]  # origins, directions, ranges, residuals, flags, ...
+    optional: dict[str, list[FloatArray | None]]  # pixel residuals (angular model only)
+    warnings: list[list[str]]
+    model: list[str]
+    iterations: list[int]
+
+    @staticmethod
+    def join(parts: list[_Solved]) -> _Solved:
+        """The parts' points one after the other."""
+        if len(parts) == 1:
+            return parts[0]
+
+        def cat(name: str) -> np.ndarray:
+            return np.concatenate([getattr(p, name) for p in parts])
+
+        return _Solved(
+            cat("index"), cat("origin"), cat("rotation"), cat("point_enu"), cat("cov_enu"),
+            cat("sigma0"), cat("max_angle"), cat("condition"), cat("rms"), cat("dof"),
+            cat("camera_rows"), cat("counts"),
+            {k: [a for p in parts for a in p.rays[k]] for k in parts[0].rays},
+            {k: [a for p in parts for a in p.optional[k]] for k in parts[0].optional},
+            [w for p in parts for w in p.warnings], [x for p in parts for x in p.model],
+            [x for p in parts for x in p.iterations])
+
+
+class _Group:
+    """A ray-count group's outcome: the solved points and those left to measure_point."""
+
+    def __init__(self, solved: _Solved | None, fallback: list[int]) -> None:
+        self.solved = solved
+        self.fallback = fallback
+
+
+def _provisional(o: FloatArray, u: FloatArray) -> FloatArray:
+    """measure_point's provisional point for M points at once: o (M, N, 3) ECEF, u unit.
+
+    The unweighted least-squares point, centred on the mean origin; the mean origin itself
+    where the normal matrix is singular or worse conditioned than PROVISIONAL_MAX_CONDITION.
+    """
+    c = o.mean(axis=1)
+    proj = np.eye(3)[None, None] - u[..., :, None] * u[..., None, :]
+    n = proj.sum(axis=1)
+    b = np.einsum("mkij,mkj->mi", proj, o - c[:, None])
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        cond = np.linalg.cond(n)
+    ok = np.isfinite(cond) & (cond <= PROVISIONAL_MAX_CONDITION)
+    out = c.copy()
+    if ok.any():
+        x = np.linalg.solve(n[ok], b[ok][..., None])[..., 0]
+        good = np.all(np.isfinite(x), axis=1)
+        rows = np.flatnonzero(ok)[good]
+        out[rows] += x[good]
+    return out
+
+
+def _solve_group(points: Sequence[BatchPoint], members: list[int], n: int, angular: bool,
+                 s_px: float, settings: SolveSettings) -> _Group:
+    """Intersect a group of points with n rays each in their own ENU frames."""
+    idx = np.asarray(members)
+    m = idx.shape[0]
+    # concatenate + reshape: several times faster than np.stack on thousands of small arrays
+    o = np.concatenate([points[i][3].origins for i in members]).reshape(m, n, 3)
+    d_r = np.concatenate([points[i][3].directions for i in members]).reshape(m, n, 3)
+    f = None
+    if angular:
+        f = np.concatenate([points[i][3].ifov for i in members]).reshape(m, n)
+    d = d_r / np.linalg.norm(d_r, axis=2, keepdims=True)  # georeferenced: no modelMatrix
+    src = resolve_source(settings.source_crs or "EPSG:4978")
+    origin = _provisional(o, d)
+    ok = np.all(np.isfinite(origin), axis=1) & (np.linalg.norm(origin, axis=1) >= 1e5)
+    if f is not None:  # NaN (ifov on some rays only) fails this too
+        ok &= np.all((f >= limits.IFOV_MIN) & (f <= limits.IFOV_MAX), axis=1)
+    origin = np.where(ok[:, None], origin, o[:, 0])  # the rows not ok go to measure_point
+    lon, lat, _ = ecef_to_geodetic(origin, src.id)
+    rot = enu_rotation(lon, lat)
+    o_enu = np.einsum("mij,mkj->mki", rot, o - origin[:, None])
+    d_enu = np.einsum("mij,mkj->mki", rot, d)
+    du, norm = unit_directions(d_enu)
+    ok &= np.all((norm >= limits.DIRECTION_MIN) & (norm <= limits.DIRECTION_MAX), axis=1)
+    ok &= np.all(np.abs(o_enu) <= limits.MAX_ORIGIN_M / math.sqrt(3), axis=(1, 2))
+    max_angle, max_isect = intersection_angles(du)
+    ok &= ~(max_isect < PARALLEL_LIMIT_DEG)  # the error and its message: measure_point's
+    fallback = idx[~ok].tolist()
+    if not ok.any():
+        return _Group(None, fallback)
+    if not ok.all():
+        idx, o, d, o_enu, du, origin, rot = (a[ok] for a in (idx, o, d, o_enu, du, origin, rot))
+        max_angle, max_isect = max_angle[ok], max_isect[ok]
+        f = None if f is None else f[ok]
+    sol = solve_core(o_enu, du, f, s_px)
+    front = np.all(sol.ranges > 0, axis=1)  # behind a camera: measure_point's error
+    if not front.all():
+        fallback += idx[~front].tolist()
+        if not front.any():
+            return _Group(None, fallback)
+        idx, o, d, o_enu, du, origin, rot = (a[front] for a in (idx, o, d, o_enu, du, origin, rot))
+        max_angle, max_isect = max_angle[front], max_isect[front]
+        f = None if f is None else f[front]
+        sol = CoreSolution(sol.points[front], sol.normal_inverse[front],
+                           sol.residuals_m[front], sol.ranges[front],
+                           None if sol.weights is None else sol.weights[front],
+                           None if sol.sigma_m is None else sol.sigma_m[front],
+                           sol.vtpv[front], sol.iterations)
+    m = idx.shape[0]
+    dof = 2 * n - 3
+    s0sq = sol.vtpv / dof
+    sigma0 = np.sqrt(s0sq)
+    warnings: list[list[str]] = [[] for _ in range(m)]
+    for k in np.flatnonzero(max_isect < WEAK_GEOMETRY_DEG).tolist():
+        warnings[k].append(
+            f"weak geometry: the largest intersection angle is {float(max_isect[k]):.2f} degrees "
+            f"(below {WEAK_GEOMETRY_DEG:g}); the depth is poorly determined")
+    ninv = sol.normal_inverse
+    res_px_sol = None
+    if f is None:
+        model = "unweighted"
+        cov = ninv * s0sq[:, None, None]
+    else:
+        model = "angular"
+        res_px_sol = sol.residuals_m / (f * sol.ranges)
+        scaled = _global_test(sol.vtpv, dof)
+        cov = ninv.copy()
+        cov[scaled] *= s0sq[scaled][:, None, None]
+        p_all = np.full(m, np.nan)
+        if scaled.any():
+            p_all[scaled] = chi2_sf(sol.vtpv[scaled], dof)
+        for k in np.flatnonzero(scaled).tolist():
+            warnings[k].append(
+                f"the aiming scatter is {float(sigma0[k]):.2f} times sigma_px = {s_px:g} px "
+                f"(global test p = {float(p_all[k]):.2g}); the covariance is scaled up "
+                "accordingly")
+    eig = np.linalg.eigvalsh(ninv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        condition = np.where(eig[:, 0] > 0, eig[:, -1] / eig[:, 0], math.inf)
+    flags, ratios = snoop_many(o_enu, du, sol.weights, sol.sigma_m)
+    for k in np.flatnonzero(flags.any(axis=1)).tolist():
+        warnings[k].append(
+            f"ray(s) {_ray_list(flags[k])} look like outliers (data snooping at 0.1 %); "
+            "check the aim or exclude them")
+    # residuals of every ray from the solved point, as measure_point recomputes them
+    rel = sol.points[:, None, :] - o_enu
+    t = np.einsum("mki,mki->mk", rel, du)
+    off = rel - du * t[..., None]
+    res_m = np.sqrt(np.einsum("mki,mki->mk", off, off))
+    res_px = None
+    if f is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            res_px = res_m / (f * np.where(t > 0, t, np.nan))
+    rays = {"origins": list(o), "directions": list(d), "sol_res_m": list(sol.residuals_m),
+            "ranges": list(sol.ranges), "flags": list(flags), "ratios": list(ratios),
+            "res_m": list(res_m)}
+    optional = {"sol_res_px": _rows(res_px_sol, m), "res_px": _rows(res_px, m)}
+    rms = np.sqrt(np.mean(sol.residuals_m**2, axis=1))
+    return _Group(_Solved(idx, origin, rot, sol.points, cov, sigma0, max_angle, condition, rms,
+                          np.full(m, dof), o.reshape(-1, 3), np.full(m, n), rays, optional,
+                          warnings, [model] * m,
+                          [sol.iterations] * m), fallback)
+
+
+def _rows(a: FloatArray | None, m: int) -> list[FloatArray | None]:
+    """The rows of an (M, N) array, or M times None."""
+    return [None] * m if a is None else list(a)
+
+
+def _global_test(vtpv: FloatArray, dof: int) -> np.ndarray:
+    """Points whose angular-model global test rejects sigma0 = 1 (p < GLOBAL_TEST_ALPHA).
+
+    chi2_sf is evaluated only above a bound below which p is surely larger than the level;
+    the decision itself is the per-point test's, p < GLOBAL_TEST_ALPHA.
+    """
+    lo, hi = 0.0, float(dof)
+    while float(chi2_sf(hi, dof)) > 2 * GLOBAL_TEST_ALPHA:
+        lo, hi = hi, 2 * hi
+    for _ in range(40):  # the largest x found with p(x) > 2 alpha: a safe lower bound
+        mid = 0.5 * (lo + hi)
+        if float(chi2_sf(mid, dof)) > 2 * GLOBAL_TEST_ALPHA:
+            lo = mid
+        else:
+            hi = mid
+    out = np.zeros(vtpv.shape, dtype=bool)
+    cand = np.flatnonzero(~(vtpv <= lo))
+    if cand.size:
+        out[cand] = chi2_sf(vtpv[cand], dof) < GLOBAL_TEST_ALPHA
+    return out
+
+
+def _ray_list(mask: np.ndarray) -> str:
+    """1-based ray numbers of a mask, as a surveyor counts them."""
+    return ", ".join(str(i + 1) for i in np.flatnonzero(mask))
+
+
+def _leave_one_out_many(o: FloatArray, d: FloatArray, w: FloatArray, sigma: FloatArray | None,
+                        active: np.ndarray) -> FloatArray:
+    """Each active ray's snooping statistic over its critical value, M points at once.
+
+    o (M, N, 3) centred origins, d unit directions, w (M, N) weights, sigma (M, N) a-priori
+    ray sigmas (angular model) or None (unweighted), active (M, N) the rays still in the test.
+    """
+    n_rays = d.shape[1]
+    eye2 = np.eye(2)
+    proj = np.eye(3)[None, None] - d[..., :, None] * d[..., None, :]
+    wp = proj * (w * active)[..., None, None]
+    n_full = wp.sum(axis=1)
+    b_full = np.einsum("mkij,mkj->mi", wp, o)
+    n_loo = n_full[:, None] - wp
+    b_loo = b_full[:, None] - np.einsum("mkij,mkj->mki", wp, o)
+    q_loo, det = sym3_inverse(n_loo)
+    x_loo = np.einsum("mkij,mkj->mki", q_loo, b_loo)
+    basis = plane_bases(d)
+    e = np.einsum("mkai,mki->mka", basis, x_loo - o)
+    bqb = np.einsum("mkai,mkij,mkbj->mkab", basis, q_loo, basis)
+    if sigma is not None:
+        c = bqb + (sigma * sigma)[..., None, None] * eye2
+        ratio = sym2_quadratic_inverse(c, e) / chi2_2_quantile(1.0 - ALPHA)
+    else:
+        rel = x_loo[:, :, None, :] - o[:, None, :, :]  # (m, i, k, 3)
+        along = np.einsum("mikj,mkj->mik", rel, d)
+        off = rel - along[..., None] * d[:, None]
+        r2 = np.einsum("mikj,mikj->mik", off, off) * active[:, None, :]
+        r2[:, np.arange(n_rays), np.arange(n_rays)] = 0.0
+        dof_loo = 2 * (active.sum(axis=1) - 1) - 3
+        s2 = r2.sum(axis=2) / dof_loo[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            stat = sym2_quadratic_inverse(bqb + eye2, e) / (2.0 * s2)
+        ratio = stat / np.asarray(f2_quantile(1.0 - ALPHA, dof_loo))[:, None]
+    scale = np.abs(n_full).max(axis=(1, 2))
+    singular = ~(np.abs(det) > 1e-12 * scale[:, None] ** 3)
+    return np.where(active & ~singular & np.isfinite(ratio), ratio, np.nan)
+
+
+def snoop_many(origins: FloatArray, directions_unit: FloatArray, weights: FloatArray | None,
+               sigma_m: FloatArray | None) -> tuple[np.ndarray, FloatArray]:
+    """:func:`gsgeo.solve.outliers.snoop` for M points of N rays at once (no loop over points).
+
+    origins, directions_unit (M, N, 3) in one Cartesian frame per point (metres), weights and
+    sigma_m (M, N) or None. Returns the flags (M, N) and the first pass's test ratios (M, N).
+    """
+    m, n_rays = directions_unit.shape[:2]
+    flags = np.zeros((m, n_rays), dtype=bool)
+    ratios = np.full((m, n_rays), np.nan)
+    if n_rays < 3 or m == 0:
+        return flags, ratios
+    o = origins - origins.mean(axis=1, keepdims=True)
+    w = np.ones((m, n_rays)) if weights is None else weights
+    active = np.ones((m, n_rays), dtype=bool)
+    run = np.arange(m)
+    first = True
+    while run.size:
+        ratio = _leave_one_out_many(o[run], directions_unit[run], w[run],
+                                    None if sigma_m is None else sigma_m[run], active[run])
+        if first:
+            ratios = ratio.copy()
+            first = False
+        significant = np.any(ratio > 1.0, axis=1)
+        run, ratio = run[significant], ratio[significant]
+        worst = np.where(np.isnan(ratio), -np.inf, ratio).argmax(axis=1)
+        flags[run, worst] = True
+        active[run, worst] = False
+        run = run[active[run].sum(axis=1) >= 3]
+    return flags, ratios
+
+
+def _finish(points: Sequence[BatchPoint], s: _Solved, settings: SolveSettings,
+            results: list[Measurement | GsgeoError | None]) -> None:
+    """ENU -> ECEF -> grid for the solved points, and their Measurements into ``results``."""
+    src = resolve_source(settings.source_crs or "EPSG:4978")
+    m = s.index.shape[0]
+    rt = np.swapaxes(s.rotation, 1, 2)
+    point_ecef = np.einsum("mij,mj->mi", rt, s.point_enu) + s.origin
+    cov_ecef = rt @ s.cov_enu @ s.rotation
+    frame_cov = None if settings.frame is None else settings.frame.point_covariances(point_ecef)
+    cov_total = cov_ecef if frame_cov is None else cov_ecef + frame_cov
+    grid: list[GridPoint | GsgeoError | None] = [None] * m
+    sigma_meas: list[FloatArray | None] = [None] * m
+    origins_grid: list[FloatArray | None] = [None] * m
+    if settings.crs:
+        gl = _grid_many(point_ecef, cov_total, np.ones(m, dtype=np.int64), settings, src,
+                        per_point_warnings=True)
+        grid, sigma_meas = gl.grid_points(frame_cov)
+        og = _grid_many(s.camera_rows, None, s.counts, settings, src,
+                        per_point_warnings=False)
+        origins_grid = og.row_blocks()
+        lon = np.array([np.nan if not isinstance(g, GridPoint) else g.lon for g in grid])
+        lat = np.array([np.nan if not isinstance(g, GridPoint) else g.lat for g in grid])
+        h84 = np.array([np.nan if not isinstance(g, GridPoint) else g.h_wgs84 for g in grid])
+    else:
+        t84 = transformer(src.id, "EPSG:4979")
+        x, y, z = t84.transform(point_ecef[:, 0], point_ecef[:, 1], point_ecef[:, 2],
+                                errcheck=False)
+        lon, lat, h84 = np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)
+    measured_at = now_utc()
+    lons, lats, hs = lon.tolist(), lat.tolist(), h84.tolist()
+    sigma0, max_angle = s.sigma0.tolist(), s.max_angle.tolist()
+    condition, rms, dof = s.condition.tolist(), s.rms.tolist(), s.dof.tolist()
+    r = s.rays
+    for k, i in enumerate(s.index.tolist()):
+        g = grid[k]
+        if isinstance(g, GsgeoError):
+            results[i] = g
+            continue
+        pid, code, description, rays, _ = points[i]
+        n = r["origins"][k].shape[0]
+        sol = IntersectionResult(
+            point=s.point_enu[k], covariance=s.cov_enu[k], sigma0=sigma0[k], dof=dof[k],
+            residuals_m=r["sol_res_m"][k], residuals_px=s.optional["sol_res_px"][k], rms_m=rms[k],
+            max_angle_deg=max_angle[k], condition=condition[k], outliers=r["flags"][k],
+            warnings=s.warnings[k], ranges_m=r["ranges"][k], outlier_ratio=r["ratios"][k],
+            model=s.model[k], iterations=s.iterations[k])
+        warnings = list(s.warnings[k])
+        if g is not None:
+            warnings += g.warnings
+        results[i] = Measurement(
+            point_id=pid, code=code, description=description, solution=sol,
+            enu_origin_ecef=s.origin[k], point_ecef=point_ecef[k], cov_ecef=cov_ecef[k],
+            cov_ecef_total=None if frame_cov is None else cov_total[k],
+            sigma_meas=sigma_meas[k], grid=g, ray_origins_ecef=r["origins"][k],
+            ray_directions_ecef=r["directions"][k], ray_origins_grid=origins_grid[k],
+            excluded=np.zeros(n, dtype=bool), measured_at=measured_at, source_crs=src.id,
+            residuals_m=r["res_m"][k], residuals_px=s.optional["res_px"][k], outliers=r["flags"][k],
+            ifov=rays.ifov, lon=lons[k], lat=lats[k], h_wgs84=hs[k], warnings=warnings)
+
+
+class _GridCalls:
+    """Units (runs of rows) transformed by to_grid_many: which call and where each unit is."""
+
+    def __init__(self, starts: np.ndarray, counts: np.ndarray) -> None:
+        u = starts.shape[0]
+        self.starts, self.counts = starts, counts
+        self.calls: list[GridPoints] = []
+        self.call = np.full(u, -1)  # index into calls; -1: the unit failed
+        self.offset = np.zeros(u, dtype=np.int64)  # the unit's first row in its call
+        self.errors: dict[int, GsgeoError] = {}
+
+    def grid_points(self, frame_cov: FloatArray | None
+                    ) -> tuple[list[GridPoint | GsgeoError | None], list[FloatArray | None]]:
+        """Per one-row unit: its GridPoint (GridPoint.build's values) or its error, and the
+        measurement-only sigmas (E, N, H) when a frame covariance was added."""
+        u = self.call.shape[0]
+        out: list[GridPoint | GsgeoError | None] = [None] * u
+        sig_meas: list[FloatArray | None] = [None] * u
+        for u_i, exc in self.errors.items():
+            out[u_i] = exc
+        for c, gp in enumerate(self.calls):
+            units = np.flatnonzero(self.call == c)
+            rows = self.offset[units]
+            assert gp.covariance is not None  # the points' call carries covariances
+            cov = gp.covariance[rows]
+            sig = np.sqrt(np.maximum(np.einsum("mii->mi", cov), 0.0)).tolist()
+            major, minor, bearing = (a.tolist() for a in ellipse_95(cov[:, :2, :2]))
+            axes = ellipsoid_axes_95(cov)
+            if frame_cov is not None:
+                j = gp.jacobian[rows]
+                meas = cov - j @ frame_cov[units] @ np.swapaxes(j, 1, 2)
+                sm = np.sqrt(np.clip(np.einsum("mii->mi", meas), 0.0, None))
+                for k, u_i in enumerate(units.tolist()):
+                    sig_meas[u_i] = sm[k]
+            e, n, h = gp.easting[rows].tolist(), gp.northing[rows].tolist(), gp.height[rows].tolist()
+            lon, lat = gp.lon[rows].tolist(), gp.lat[rows].tolist()
+            hw, he = gp.h_wgs84[rows].tolist(), gp.h_ellipsoidal[rows].tolist()
+            for k, u_i in enumerate(units.tolist()):
+                out[u_i] = GridPoint(
+                    easting=e[k], northing=n[k], height=h[k], covariance=cov[k], crs=gp.crs,
+                    height_type=gp.height_type, vertical_datum=gp.vertical_datum,
+                    operation=gp.operation, operation_accuracy_m=gp.operation_accuracy_m,
+                    lon=lon[k], lat=lat[k], h_wgs84=hw[k], h_ellipsoidal=he[k],
+                    sigma_e=sig[k][0], sigma_n=sig[k][1], sigma_h=sig[k][2],
+                    ellipse_major_95=major[k], ellipse_minor_95=minor[k],
+                    ellipse_bearing_deg=bearing[k], ellipsoid_axes_95=axes[k],
+                    warnings=list(gp.warnings))
+        return out, sig_meas
+
+    def row_blocks(self) -> list[FloatArray | None]:
+        """Per unit: its rows' (E, N, H) as (count, 3), None where its call failed."""
+        out: list[FloatArray | None] = [None] * self.call.shape[0]
+        for c, gp in enumerate(self.calls):
+            enh = np.stack([gp.easting, gp.northing, gp.height], axis=-1)
+            units = np.flatnonzero(self.call == c)
+            for u_i, off, cnt in zip(units.tolist(), self.offset[units].tolist(),
+                                     self.counts[units].tolist(), strict=True):
+                out[u_i] = enh[off:off + cnt]
+        return out
+
+
+def _area_masks(areas: list[object], lon: FloatArray, lat: FloatArray) -> np.ndarray:
+    """(len(areas), M) whether each (lon, lat) lies in each area of use (None: everywhere),
+    the test of :func:`gsgeo.crs.transformers.in_area` on arrays."""
+    out = np.ones((len(areas), lon.shape[0]), dtype=bool)
+    for k, a in enumerate(areas):
+        if a is None:
+            continue
+        w, s, e, n = (float(getattr(a, name)) for name in ("west", "south", "east", "north"))
+        in_lon = (lon >= w) & (lon <= e) if w <= e else (lon >= w) | (lon <= e)
+        out[k] = (lat >= s) & (lat <= n) & in_lon
+    return out
+
+
+def _grid_many(rows: FloatArray, covs: FloatArray | None, counts: np.ndarray,
+               settings: SolveSettings, src: SourceCRS, *, per_point_warnings: bool
+               ) -> _GridCalls:
+    """Units of ``counts`` rows each into the grid by as few to_grid_many calls as give each
+    unit what its own call would: the same operations (chosen at the centroid of a call's
+    points) and, with ``per_point_warnings``, the same warnings."""
+    assert settings.crs is not None
+    g = grid_crs(settings.crs, settings.vertical)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    calls = _GridCalls(starts, counts)
+    lon, lat, _ = ecef_to_geodetic(rows, src.id)
+    ulon = np.add.reduceat(lon, starts) / counts
+    ulat = np.add.reduceat(lat, starts) / counts
+    kw = {"vertical": settings.vertical, "geoid": settings.geoid, "source_crs": src.id}
+
+    def rows_of(units: np.ndarray) -> np.ndarray:
+        c = counts[units]
+        first = np.repeat(starts[units] - np.concatenate([[0], np.cumsum(c)[:-1]]), c)
+        return first + np.arange(int(c.sum()))
+
+    def run(units: np.ndarray) -> None:
+        rr = rows_of(units)
+        try:
+            gp = to_grid_many(rows[rr], None if covs is None else covs[rr], settings.crs or "",
+                              **kw)  # type: ignore[arg-type]
+        except GsgeoError as exc:
+            if units.size == 1:
+                calls.errors[int(units[0])] = exc
+                return
+            half = units.size // 2
+            run(units[:half])
+            run(units[half:])
+            return
+        calls.call[units] = len(calls.calls)
+        calls.offset[units] = np.concatenate([[0], np.cumsum(counts[units])[:-1]])
+        calls.calls.append(gp)
+
+    # The decisions of a call: each candidate operation's area of use at its centroid
+    # (horizontal, and vertical through PROJ), and per point the grid CRS's own area.
+    areas: list[object] = [t.area_of_use for t in
+                           candidates(src.geographic_3d_id, g.id).available]
+    if g.vertical is not None and settings.geoid is None:
+        comp = _compound_text(rows, counts, settings, src)
+        if comp is None:  # no unit could be transformed to learn it: each on its own
+            for u_i in range(counts.shape[0]):
+                run(np.array([u_i]))
+            return calls
+        areas += [t.area_of_use for t in candidates(src.geographic_3d_id, comp).available]
+    key = _area_masks(areas, ulon, ulat)
+    single = np.zeros(counts.shape[0], dtype=bool)
+    if per_point_warnings and g.horizontal.area_of_use is not None:
+        # outside the grid CRS's area the warning counts the call's points: one call each
+        single = ~_area_masks([g.horizontal.area_of_use], ulon, ulat)[0]
+    for u_i in np.flatnonzero(single).tolist():
+        run(np.array([u_i]))
+    rest = np.flatnonzero(~single)
+    if rest.size:
+        if np.all(key[:, rest] == key[:, rest[:1]]):  # the usual case: one scene, one area
+            inverse = np.zeros(rest.size, dtype=np.int64)
+        else:
+            _, inverse = np.unique(key[:, rest], axis=1, return_inverse=True)
+        for k in range(int(inverse.max()) + 1):
+            units = rest[inverse.reshape(-1) == k]
+            rr = rows_of(units)
+            centre = _area_masks(areas, np.array([np.mean(lon[rr])]),
+                                 np.array([np.mean(lat[rr])]))[:, 0]
+            if units.size > 1 and not np.array_equal(centre, key[:, units[0]]):
+                for u_i in units.tolist():
+                    run(np.array([u_i]))
+            else:
+                run(units)
+    return calls
+
+
+def _compound_text(rows: FloatArray, counts: np.ndarray, settings: SolveSettings,
+                   src: SourceCRS) -> str | None:
+    """The compound CRS text to_grid_many chooses vertical operations for (its result's
+    ``crs``), from a call on the first unit that can be transformed; None if none can."""
+    start = 0
+    for c in counts.tolist()[:3]:
+        try:
+            gp = to_grid_many(rows[start:start + c], None, settings.crs or "",
+                              vertical=settings.vertical, geoid=settings.geoid,
+                              source_crs=src.id)
+        except GsgeoError:
+            start += c
+            continue
+        return gp.crs
+    return None
