@@ -38,8 +38,9 @@ from gsgeo.solve.stats import chi2_sf
 #: Largest ratio of the second to the first singular value of the centred control below
 #: which the points count as collinear (the rotation about their line is undetermined).
 COLLINEAR_RATIO = 1e-3
-#: Gauss-Newton stops when the update is below these: metres, radians, relative scale.
-STEP_TOLERANCE = (1e-7, 1e-11, 1e-11)
+#: Gauss-Newton stops when the update moves no control point by more than this (metres):
+#: far below any survey precision, above the rounding of ECEF coordinates (~1e-9 m).
+STEP_TOLERANCE_M = 1e-7
 MAX_ITERATIONS = 30
 
 
@@ -195,8 +196,9 @@ def fit_similarity(src: ArrayLike, dst: ArrayLike, cov_src: ArrayLike,
         k = 1.0 + step[6]
         sim = Similarity(sim.scale * k, rot @ sim.rotation,
                          k * rot @ (sim.translation - c) + c + step[:3])
-        if (np.abs(step[:3]).max() < STEP_TOLERANCE[0] and np.abs(step[3:6]).max()
-                < STEP_TOLERANCE[1] and abs(step[6]) < STEP_TOLERANCE[2]):
+        reach = float(np.abs(y0 - c).max())
+        moved = (np.abs(step[:3]).max() + (np.linalg.norm(step[3:6]) + abs(step[6])) * reach)
+        if moved < STEP_TOLERANCE_M:
             break
     y0, weights, j, normal, _, combined = _system(sim, x, y, cx, cy, c)
     cov = np.linalg.inv(normal)
