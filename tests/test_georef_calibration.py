@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from georef_helpers import truth
+
 from gsgeo.crs.ellipsoid import enu_rotation, geodetic_to_ecef_closed_form
 from gsgeo.georef.control import enu_covariances
 from gsgeo.georef.helmert import Similarity, fit_similarity
