@@ -203,11 +203,33 @@ def test_geoid_file_and_vertical_crs_equal_measure_point(fallbacks):
     assert fallbacks == []
 
 
-def test_exclusions_model_matrices_and_partial_ifov_go_through_measure_point(fallbacks):
+def test_excluded_rays_equal_measure_point(fallbacks):
+    rng = np.random.default_rng(6)
+    points = make_points(rng, 60, rays=(3, 7))
+    for k, (pid, code, desc, rays, _) in enumerate(points):
+        n = len(rays)
+        drop = [int(rng.integers(n))]
+        if n > 4 and k % 3 == 0:
+            drop += [int(rng.integers(n)), drop[0]]  # a second ray, and one index twice
+        if k % 4 == 0:  # an excluded blunder: its residual is large, the point unaffected
+            d = rays.directions.copy()
+            d[drop[0]] += 0.02 * np.cross(d[drop[0]], [0.0, 0.0, 1.0])
+            rays = Rays(rays.origins, d, rays.ifov)
+        points[k] = (pid, code, desc, rays, tuple(drop) if k % 5 else np.array(drop))
+    settings = SolveSettings(crs="EPSG:27700")
+    got = measure_batch(points, settings)
+    assert fallbacks == []
+    for g, r in zip(got, reference(points, settings), strict=True):
+        assert_same(g, r)
+        assert isinstance(g, Measurement)
+        assert any("excluded by request" in w for w in g.warnings)
+        assert g.n_rays == len(g.excluded) - int(g.excluded.sum()) < len(g.excluded)
+        assert not (g.outliers is not None and (g.outliers & g.excluded).any())
+
+
+def test_model_matrices_partial_ifov_and_refused_exclusions_go_through_measure_point(fallbacks):
     rng = np.random.default_rng(5)
     points = make_points(rng, 12, rays=(4, 6))
-    pid, code, desc, rays, _ = points[0]
-    points[0] = (pid, code, desc, rays, (1,))  # one ray excluded
     pid, code, desc, rays, _ = points[1]
     m = np.eye(4)
     m[:3, 3] = (2.0, -1.0, 0.5)  # a viewer modelMatrix (a shift)
@@ -218,17 +240,20 @@ def test_exclusions_model_matrices_and_partial_ifov_go_through_measure_point(fal
     f[1] = np.nan
     points[2] = (pid, code, desc, Rays(rays.origins, rays.directions, f), ())  # ifov on some
     pid, code, desc, rays, _ = points[3]
-    points[3] = (pid, code, desc, rays, (0, 1, 2, 3, 4, 5)[:len(rays) - 1])  # leaves one ray
+    points[3] = (pid, code, desc, rays, tuple(range(len(rays) - 1)))  # leaves one ray
+    points[4] = points[4][:4] + ((len(points[4][3]),),)  # index out of range
+    points[5] = points[5][:4] + ((True,),)  # not an index
     settings = SolveSettings(crs="EPSG:27700")
     got = measure_batch(points, settings)
-    assert sorted(fallbacks) == ["P0", "P1", "P2", "P3"]
+    assert sorted(fallbacks) == ["P1", "P2", "P3", "P4", "P5"]
     for g, r in zip(got, reference(points, settings), strict=True):
         assert_same(g, r)
-    assert isinstance(got[0], Measurement) and any("excluded by request" in w for w in got[0].warnings)
     assert isinstance(got[1], Measurement)
     np.testing.assert_allclose(got[1].ray_origins_ecef, rays_of(points[1]).origins - m[:3, 3])
     assert isinstance(got[2], MeasurementFailure) and "no ifov on ray(s) 1" in got[2].error
     assert isinstance(got[3], MeasurementFailure) and "leaves fewer than 2" in got[3].error
+    assert isinstance(got[4], MeasurementFailure) and "cannot exclude ray index" in got[4].error
+    assert isinstance(got[5], MeasurementFailure) and "cannot exclude ray index" in got[5].error
 
 
 def rays_of(point):

@@ -74,18 +74,29 @@ def measure_batch(points: Sequence[BatchPoint],
     measure_points([], settings)  # the same up-front checks of the settings
     results: list[Measurement | GsgeoError | None] = [None] * len(points)
     s_px = _solver_sigma_px(settings.sigma_px)
-    groups: dict[tuple[int, bool], list[int]] = {}
+    groups: dict[tuple[int, int, bool], list[int]] = {}
+    keeps: dict[int, np.ndarray] = {}
     slow: list[int] = []
     for i, (_, _, _, rays, exclude) in enumerate(points):
         n = len(rays)
-        if s_px is None or len(exclude) or rays.model_matrices is not None or n < 2:
+        keep = _keep_mask(exclude, n) if len(exclude) else None
+        if (s_px is None or rays.model_matrices is not None or n < 2
+                or (len(exclude) and keep is None)):
             slow.append(i)
-        else:  # ifov on some rays only is found in the group (measure_point's error)
-            groups.setdefault((n, rays.ifov is not None), []).append(i)
+            continue
+        if keep is not None:
+            keeps[i] = keep
+        # ifov on some rays only is found in the group (measure_point's error)
+        n_keep = n if keep is None else int(keep.sum())
+        groups.setdefault((n, n_keep, rays.ifov is not None), []).append(i)
     solved: list[_Solved] = []
-    for (n, angular), members in groups.items():
+    for (n, n_keep, angular), members in groups.items():
         assert s_px is not None  # a point is grouped only with a usable sigma_px
-        group = _solve_group(points, members, n, angular, s_px, settings)
+        keep = np.ones((len(members), n), dtype=bool)
+        for row, i in enumerate(members):
+            if i in keeps:
+                keep[row] = keeps[i]
+        group = _solve_group(points, members, keep, n_keep, angular, s_px, settings)
         slow += group.fallback
         if group.solved is not None:
             solved.append(group.solved)
@@ -105,6 +116,17 @@ def measure_batch(points: Sequence[BatchPoint],
     if crs_errors and len(crs_errors) == len(out) and len({str(e) for e in crs_errors}) == 1:
         raise crs_errors[0]
     return out
+
+
+def _keep_mask(exclude: Sequence[int], n: int) -> np.ndarray | None:
+    """The rays (n,) kept after excluding ``exclude``, or None where measure_point refuses
+    the exclusion (an index that is not an int in 0..n-1, or fewer than 2 rays left)."""
+    mask = np.ones(n, dtype=bool)
+    for k in exclude:
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < n:
+            return None
+        mask[int(k)] = False
+    return mask if mask.sum() >= 2 else None
 
 
 def _one(point: BatchPoint, settings: SolveSettings) -> Measurement | GsgeoError:
@@ -144,7 +166,8 @@ class _Solved:
     counts: np.ndarray  # (M,) rays of each point
     rays: dict[str, list[np.ndarray]]  # origins, directions, ranges, residuals, flags, ...
     optional: dict[str, list[FloatArray | None]]  # pixel residuals (angular model only)
-    warnings: list[list[str]]
+    warnings: list[list[str]]  # the solution's
+    notes: list[list[str]]  # the measurement's own (exclusions), after the solution's
     model: list[str]
     iterations: list[int]
 
@@ -163,7 +186,8 @@ class _Solved:
             cat("camera_rows"), cat("counts"),
             {k: [a for p in parts for a in p.rays[k]] for k in parts[0].rays},
             {k: [a for p in parts for a in p.optional[k]] for k in parts[0].optional},
-            [w for p in parts for w in p.warnings], [x for p in parts for x in p.model],
+            [w for p in parts for w in p.warnings], [w for p in parts for w in p.notes],
+            [x for p in parts for x in p.model],
             [x for p in parts for x in p.iterations])
 
 
@@ -197,11 +221,12 @@ def _provisional(o: FloatArray, u: FloatArray) -> FloatArray:
     return out
 
 
-def _solve_group(points: Sequence[BatchPoint], members: list[int], n: int, angular: bool,
-                 s_px: float, settings: SolveSettings) -> _Group:
-    """Intersect a group of points with n rays each in their own ENU frames."""
+def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndarray,
+                 n_keep: int, angular: bool, s_px: float, settings: SolveSettings) -> _Group:
+    """Intersect a group of points of n rays each, ``keep`` (M, n) with n_keep rays kept in
+    every row, in their own ENU frames."""
     idx = np.asarray(members)
-    m = idx.shape[0]
+    m, n = keep.shape
     # concatenate + reshape: several times faster than np.stack on thousands of small arrays
     o = np.concatenate([points[i][3].origins for i in members]).reshape(m, n, 3)
     d_r = np.concatenate([points[i][3].directions for i in members]).reshape(m, n, 3)
@@ -210,7 +235,7 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], n: int, angul
         f = np.concatenate([points[i][3].ifov for i in members]).reshape(m, n)
     d = d_r / np.linalg.norm(d_r, axis=2, keepdims=True)  # georeferenced: no modelMatrix
     src = resolve_source(settings.source_crs or "EPSG:4978")
-    origin = _provisional(o, d)
+    origin = _provisional(_kept(o, keep, n_keep), _kept(d, keep, n_keep))
     ok = np.all(np.isfinite(origin), axis=1) & (np.linalg.norm(origin, axis=1) >= 1e5)
     if f is not None:  # NaN (ifov on some rays only) fails this too
         ok &= np.all((f >= limits.IFOV_MIN) & (f <= limits.IFOV_MAX), axis=1)
@@ -222,31 +247,31 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], n: int, angul
     du, norm = unit_directions(d_enu)
     ok &= np.all((norm >= limits.DIRECTION_MIN) & (norm <= limits.DIRECTION_MAX), axis=1)
     ok &= np.all(np.abs(o_enu) <= limits.MAX_ORIGIN_M / math.sqrt(3), axis=(1, 2))
-    max_angle, max_isect = intersection_angles(du)
+    max_angle, max_isect = intersection_angles(_kept(du, keep, n_keep))
     ok &= ~(max_isect < PARALLEL_LIMIT_DEG)  # the error and its message: measure_point's
     fallback = idx[~ok].tolist()
-    if not ok.any():
+    if ok.any():
+        sol = solve_core(_kept(o_enu[ok], keep[ok], n_keep), _kept(du[ok], keep[ok], n_keep),
+                         None if f is None else _kept(f[ok], keep[ok], n_keep), s_px)
+        front = np.all(sol.ranges > 0, axis=1)  # behind a camera: measure_point's error
+        fallback += idx[ok][~front].tolist()
+        rows = np.flatnonzero(ok)[front]
+    else:
+        rows = np.zeros(0, dtype=np.int64)
+    if rows.size == 0:
         return _Group(None, fallback)
-    if not ok.all():
-        idx, o, d, o_enu, du, origin, rot = (a[ok] for a in (idx, o, d, o_enu, du, origin, rot))
-        max_angle, max_isect = max_angle[ok], max_isect[ok]
-        f = None if f is None else f[ok]
-    sol = solve_core(o_enu, du, f, s_px)
-    front = np.all(sol.ranges > 0, axis=1)  # behind a camera: measure_point's error
     if not front.all():
-        fallback += idx[~front].tolist()
-        if not front.any():
-            return _Group(None, fallback)
-        idx, o, d, o_enu, du, origin, rot = (a[front] for a in (idx, o, d, o_enu, du, origin, rot))
-        max_angle, max_isect = max_angle[front], max_isect[front]
-        f = None if f is None else f[front]
         sol = CoreSolution(sol.points[front], sol.normal_inverse[front],
                            sol.residuals_m[front], sol.ranges[front],
                            None if sol.weights is None else sol.weights[front],
                            None if sol.sigma_m is None else sol.sigma_m[front],
                            sol.vtpv[front], sol.iterations)
-    m = idx.shape[0]
-    dof = 2 * n - 3
+    idx, keep, o, d, o_enu, du, origin, rot = (
+        a[rows] for a in (idx, keep, o, d, o_enu, du, origin, rot))
+    max_angle, max_isect = max_angle[rows], max_isect[rows]
+    f = None if f is None else f[rows]
+    m = rows.size
+    dof = 2 * n_keep - 3
     s0sq = sol.vtpv / dof
     sigma0 = np.sqrt(s0sq)
     warnings: list[list[str]] = [[] for _ in range(m)]
@@ -256,12 +281,13 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], n: int, angul
             f"(below {WEAK_GEOMETRY_DEG:g}); the depth is poorly determined")
     ninv = sol.normal_inverse
     res_px_sol = None
-    if f is None:
+    f_keep = None if f is None else _kept(f, keep, n_keep)
+    if f_keep is None:
         model = "unweighted"
         cov = ninv * s0sq[:, None, None]
     else:
         model = "angular"
-        res_px_sol = sol.residuals_m / (f * sol.ranges)
+        res_px_sol = sol.residuals_m / (f_keep * sol.ranges)
         scaled = _global_test(sol.vtpv, dof)
         cov = ninv.copy()
         cov[scaled] *= s0sq[scaled][:, None, None]
@@ -276,12 +302,18 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], n: int, angul
     eig = np.linalg.eigvalsh(ninv)
     with np.errstate(divide="ignore", invalid="ignore"):
         condition = np.where(eig[:, 0] > 0, eig[:, -1] / eig[:, 0], math.inf)
-    flags, ratios = snoop_many(o_enu, du, sol.weights, sol.sigma_m)
+    flags, ratios = snoop_many(_kept(o_enu, keep, n_keep), _kept(du, keep, n_keep),
+                               sol.weights, sol.sigma_m)
     for k in np.flatnonzero(flags.any(axis=1)).tolist():
-        warnings[k].append(
+        warnings[k].append(  # ray numbers among the kept rays, as intersect sees them
             f"ray(s) {_ray_list(flags[k])} look like outliers (data snooping at 0.1 %); "
             "check the aim or exclude them")
-    # residuals of every ray from the solved point, as measure_point recomputes them
+    notes: list[list[str]] = [[] for _ in range(m)]  # the Measurement's, after the solution's
+    for k in np.flatnonzero(~keep.all(axis=1)).tolist():
+        notes[k].append(f"ray(s) {_ray_list(np.logical_not(keep[k]))} excluded by request")
+    all_flags = np.zeros((m, n), dtype=bool)
+    all_flags[keep] = flags.reshape(-1)
+    # residuals of every ray (excluded ones too) from the solved point, as measure_point has
     rel = sol.points[:, None, :] - o_enu
     t = np.einsum("mki,mki->mk", rel, du)
     off = rel - du * t[..., None]
@@ -291,14 +323,21 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], n: int, angul
         with np.errstate(invalid="ignore", divide="ignore"):
             res_px = res_m / (f * np.where(t > 0, t, np.nan))
     rays = {"origins": list(o), "directions": list(d), "sol_res_m": list(sol.residuals_m),
-            "ranges": list(sol.ranges), "flags": list(flags), "ratios": list(ratios),
-            "res_m": list(res_m)}
+            "ranges": list(sol.ranges), "sol_flags": list(flags), "flags": list(all_flags),
+            "ratios": list(ratios), "res_m": list(res_m),
+            "excluded": list(np.logical_not(keep))}
     optional = {"sol_res_px": _rows(res_px_sol, m), "res_px": _rows(res_px, m)}
     rms = np.sqrt(np.mean(sol.residuals_m**2, axis=1))
     return _Group(_Solved(idx, origin, rot, sol.points, cov, sigma0, max_angle, condition, rms,
                           np.full(m, dof), o.reshape(-1, 3), np.full(m, n), rays, optional,
-                          warnings, [model] * m,
-                          [sol.iterations] * m), fallback)
+                          warnings, notes, [model] * m, [sol.iterations] * m), fallback)
+
+
+def _kept(a: np.ndarray, keep: np.ndarray, n_keep: int) -> np.ndarray:
+    """The kept rays' rows of a per-ray array a (M, N, ...), as (M, n_keep, ...)."""
+    if n_keep == keep.shape[1]:
+        return a
+    return a[keep].reshape((a.shape[0], n_keep) + a.shape[2:])
 
 
 def _rows(a: FloatArray | None, m: int) -> list[FloatArray | None]:
@@ -443,14 +482,13 @@ def _finish(points: Sequence[BatchPoint], s: _Solved, settings: SolveSettings,
             results[i] = g
             continue
         pid, code, description, rays, _ = points[i]
-        n = r["origins"][k].shape[0]
         sol = IntersectionResult(
             point=s.point_enu[k], covariance=s.cov_enu[k], sigma0=sigma0[k], dof=dof[k],
             residuals_m=r["sol_res_m"][k], residuals_px=s.optional["sol_res_px"][k], rms_m=rms[k],
-            max_angle_deg=max_angle[k], condition=condition[k], outliers=r["flags"][k],
+            max_angle_deg=max_angle[k], condition=condition[k], outliers=r["sol_flags"][k],
             warnings=s.warnings[k], ranges_m=r["ranges"][k], outlier_ratio=r["ratios"][k],
             model=s.model[k], iterations=s.iterations[k])
-        warnings = list(s.warnings[k])
+        warnings = s.warnings[k] + s.notes[k]
         if g is not None:
             warnings += g.warnings
         results[i] = Measurement(
@@ -459,7 +497,7 @@ def _finish(points: Sequence[BatchPoint], s: _Solved, settings: SolveSettings,
             cov_ecef_total=None if frame_cov is None else cov_total[k],
             sigma_meas=sigma_meas[k], grid=g, ray_origins_ecef=r["origins"][k],
             ray_directions_ecef=r["directions"][k], ray_origins_grid=origins_grid[k],
-            excluded=np.zeros(n, dtype=bool), measured_at=measured_at, source_crs=src.id,
+            excluded=r["excluded"][k], measured_at=measured_at, source_crs=src.id,
             residuals_m=r["res_m"][k], residuals_px=s.optional["res_px"][k], outliers=r["flags"][k],
             ifov=rays.ifov, lon=lons[k], lat=lats[k], h_wgs84=hs[k], warnings=warnings)
 
