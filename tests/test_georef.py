@@ -27,6 +27,7 @@ from gsgeo.georef.scale import Distance
 from gsgeo.measure.rays import SolveSettings
 from gsgeo.service import open_projects
 from gsgeo.service.checkpoints import CheckPointRow
+from gsgeo.store.sqlite import SQLiteTransaction
 from gsgeo.tiles.georef import Georeference
 from gsgeo.tiles.georefhistory import read_scene_georef
 from gsgeo.tiles.ply import write_ply
@@ -248,7 +249,7 @@ def test_a_store_failure_puts_the_tileset_back(small_site, monkeypatch):
     def broken(*_args, **_kw):
         raise OSError("disk full")
 
-    monkeypatch.setattr(type(svc), "_measure_into", broken)
+    monkeypatch.setattr(SQLiteTransaction, "update_point", broken)
     with pytest.raises(OSError):
         svc.georeference("s", apply=True)
     monkeypatch.undo()

@@ -27,6 +27,7 @@ from gsgeo.georef.scale import Distance, fit_scale, origin_of
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, Rays
 from gsgeo.measure.accuracy import accuracy_report
+from gsgeo.measure.batch import measure_batch
 from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
 from gsgeo.measure.rays import SolveSettings
 from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
@@ -244,9 +245,43 @@ class Projects:
 
     def _remeasure_all(self, tx: Transaction, p: Project) -> None:
         ctx = scene_frame(self.data_dir, p.scene)
-        for pt in tx.list_points(p.id):
-            self._measure_into(pt, p, ctx=ctx)
+        pts = tx.list_points(p.id)
+        self._measure_many(pts, p, ctx)
+        for pt in pts:
             tx.update_point(pt)
+
+    def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None) -> None:
+        """Re-measure stored points with the settings of ``p`` in the scene frame ``ctx``, all
+        at once (gsgeo.measure.batch: vectorised, point by point the result _measure_into
+        gives); a point that fails keeps the reason."""
+        typed: list[tuple[PointRecord, Rays]] = []
+        for pt in pts:
+            pt.solved_rev = p.settings_rev
+            try:
+                typed.append((pt, rays_now(stored_rays(pt.rays), pt.frame, ctx)))
+            except GsgeoError as exc:
+                pt.result = pt.record = None
+                pt.error = str(exc)
+        if not typed:
+            return
+        try:
+            settings = solve_settings(p.settings(), self.data_dir,
+                                      None if ctx is None else ctx.frame)
+            results = measure_batch([(pt.id, pt.code, pt.description, rays, pt.excluded)
+                                     for pt, rays in typed], settings)
+        except GsgeoError as exc:  # the settings fail every point alike (e.g. a missing grid)
+            for pt, _ in typed:
+                pt.result = pt.record = None
+                pt.error = str(exc)
+            return
+        for (pt, _), m in zip(typed, results, strict=True):
+            if isinstance(m, Measurement):
+                pt.result = measured_result(m)
+                pt.record = with_record(pt.result)
+                pt.error = None
+            else:
+                pt.result = pt.record = None
+                pt.error = m.error
 
     def delete_project(self, pid: str) -> None:
         with self.store.transaction() as tx:
@@ -660,12 +695,14 @@ class Projects:
         for q in tx.list_projects():
             if q.scene != scene:
                 continue
-            for pt in tx.list_points(q.id):
+            pts = tx.list_points(q.id)
+            for pt in pts:
                 if pt.frame is None:
                     pt.frame = dict(pinned)
-                self._measure_into(pt, q, ctx=ctx)
+            self._measure_many(pts, q, ctx)
+            for pt in pts:
                 tx.update_point(pt)
-                n += 1
+            n += len(pts)
         return n
 
     # check points ---------------------------------------------------------------------
