@@ -179,6 +179,16 @@ def test_control_is_well_spread(truth):
     assert sv[1] > 10 and sv[2] > 2, sv       # true metres
 
 
+def _measure_control_and_apply(projects: Projects, pts: dict, rng: np.random.Generator) -> dict:
+    """Measure the six control targets (3 rays each aimed at them in the local scene, 0.3 px
+    noise at 1 mrad a pixel), fit and apply; the fit's report."""
+    for pid in CONTROL_IDS:
+        rays = rays_at(pts[pid]["rendered_ecef"], n=3, rng=rng, noise_rad=3e-4, ifov=1e-3,
+                       radius=3.0, height=4.0)      # local units: 10 m and 13 m on the ground
+        projects.add_point("demo-local", {"id": pid, "rays": rays, "georef_version": 0})
+    return projects.georeference("demo-local", apply=True)
+
+
 def test_georeference_by_measured_control_recovers_the_true_similarity(data, truth, similarity,
                                                                        tmp_path):
     """The workflow of the README: measure the six control targets (rays aimed at them in the
@@ -192,11 +202,7 @@ def test_georeference_by_measured_control_recovers_the_true_similarity(data, tru
     store = open_store(d)
     try:
         projects = Projects(store, d)
-        for pid in CONTROL_IDS:
-            rays = rays_at(pts[pid]["rendered_ecef"], n=3, rng=rng, noise_rad=3e-4, ifov=1e-3,
-                           radius=3.0, height=4.0)      # local units: 10 m and 13 m on the ground
-            projects.add_point("demo-local", {"id": pid, "rays": rays, "georef_version": 0})
-        rep = projects.georeference("demo-local", apply=True)
+        rep = _measure_control_and_apply(projects, pts, rng)
         assert rep["applied"] is True and rep["outliers"] == []
         s_true = truth["true_similarity"]["scale"]
         assert abs(rep["scale"] / s_true - 1) < 1e-3, (rep["scale"], s_true)
@@ -221,6 +227,34 @@ def test_georeference_by_measured_control_recovers_the_true_similarity(data, tru
         store.close()
     assert acc["counts"]["matched"] == 4
     assert acc["statistics"]["RMSE_3D"] < 0.05
+
+
+def test_rebuild_after_a_georeference_keeps_points_on_their_features(data, truth, tmp_path):
+    """`--rebuild` puts the scene back at lat 0, lon 0; the points measured on it while it was
+    georeferenced are solved again there (on their targets), not left at Parker's Piece."""
+    d = tmp_path / "data"
+    shutil.copytree(data, d)
+    pts = {p["id"]: p for p in truth["points"]}
+    store = open_store(d)
+    try:
+        _measure_control_and_apply(Projects(store, d), pts, np.random.default_rng(7))
+    finally:
+        store.close()
+    r = _gsgeo("demo", "--local", "--rebuild", "--data", str(d), "--no-serve")
+    assert r.returncode == 0, r.stderr
+    assert read_scene_georef(d / "scenes" / "demo-local").georeferenced is False
+    store = open_store(d)
+    try:
+        points = Projects(store, d).list_points("demo-local")
+    finally:
+        store.close()
+    assert sorted(p.id for p in points) == sorted(CONTROL_IDS)
+    for p in points:
+        assert p.result is not None, p.error
+        got = np.asarray(p.result["point_ecef"])
+        # local units: 1 cm on the ground is 3 mm here
+        assert np.linalg.norm(got - np.asarray(pts[p.id]["rendered_ecef"])) < 0.006, p.id
+    assert "6 point(s) measured on scene 'demo-local' solved again" in r.stderr
 
 
 def test_rerun_reuses_the_build_and_keeps_measurements(data, truth):

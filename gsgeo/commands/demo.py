@@ -67,6 +67,17 @@ def _check_port_free(host: str, port: int) -> None:
                          "may be running there: pass --port N, or --no-serve") from None
 
 
+def _remeasured(data: Path, scene: str) -> None:
+    """After a (re)build: points measured on the scene before (in a georeference applied to
+    it since, say) are solved again in the frame it is built in."""
+    from gsgeo.demo.project import remeasure_scene
+
+    n = remeasure_scene(data, scene)
+    if n:
+        print(f"gsgeo demo: {n} point(s) measured on scene '{scene}' solved again in the "
+              "rebuilt scene's frame", file=sys.stderr)
+
+
 def _build(data: Path, rebuild: bool) -> tuple[str, str]:
     """Build (or reuse) the demo and its project, print where they are; (scene, project id)."""
     from gsgeo.demo.build import build_demo
@@ -76,6 +87,8 @@ def _build(data: Path, rebuild: bool) -> tuple[str, str]:
     if not build.built:
         print(f"gsgeo demo: using the scene built in {build.tileset}", file=sys.stderr)
     project, n_check = ensure_project(data, build)
+    if build.built:
+        _remeasured(data, build.tileset.name)
     print(f"demo scene   {build.tileset / 'tileset.json'} ({build.splats:,} splats)")
     print(f"ground truth {build.checkpoints_csv} ({n_check} check points, EPSG:27700, "
           "WGS 84 ellipsoidal heights)")
@@ -92,6 +105,8 @@ def _build_local(data: Path, rebuild: bool) -> tuple[str, str]:
     if not build.built:
         print(f"gsgeo demo: using the scene built in {build.tileset}", file=sys.stderr)
     project, n_control, n_check = ensure_local_project(data, build)
+    if build.built:
+        _remeasured(data, build.tileset.name)
     print(f"local scene  {build.tileset / 'tileset.json'} ({build.splats:,} splats, not "
           "georeferenced: at lat 0, lon 0)")
     print(f"control      {build.control_csv} ({n_control} control points, EPSG:27700, WGS 84 "

@@ -72,3 +72,21 @@ def ensure_local_project(data_dir: str | os.PathLike, build: LocalBuild) -> tupl
     finally:
         store.close()
     return project, counts[0], counts[1]
+
+
+def remeasure_scene(data_dir: str | os.PathLike, scene: str) -> int:
+    """Solve every point of every project on ``scene`` again in the scene's current frame
+    (after a rebuild put the scene back where it is tiled: each point's rays are carried
+    from the frame they were taken under, so the points stay on their features). Returns
+    the number of points."""
+    store = open_store(Path(data_dir))
+    try:
+        projects = Projects(store, Path(data_dir))
+        n = 0
+        for p in projects.list_projects():
+            if p.scene == scene and projects.list_points(p.id):
+                projects.remeasure_all(p.id)
+                n += len(projects.list_points(p.id))
+    finally:
+        store.close()
+    return n
