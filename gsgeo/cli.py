@@ -32,6 +32,7 @@ COMMANDS = {
     "crs": "gsgeo.commands.crs",
     "serve": "gsgeo.commands.serve",
     "demo": "gsgeo.commands.demo",
+    "report": "gsgeo.commands.report",
     "georef": "gsgeo.commands.georef",
 }
 

@@ -54,6 +54,13 @@ else
     "${PIP[@]}" -e .
 fi
 
+# WeasyPrint (the PDF of `gsgeo report`) lays text out with Debian's Pango libraries.
+pango=()
+for lib in libpango-1.0-0 libpangoft2-1.0-0; do
+    dpkg-query -W -f='${Status}' "$lib" 2>/dev/null | grep -q "ok installed" || pango+=("$lib")
+done
+if [ "${#pango[@]}" -gt 0 ]; then apt_install "${pango[@]}"; fi
+
 # The CesiumJS client: cesium is pinned in web/package-lock.json; nothing is fetched at run time.
 if [ -f web/package.json ]; then
     command -v npm >/dev/null 2>&1 || apt_install npm

@@ -1,15 +1,18 @@
-"""gsgeo runs with its declared run-time dependencies only: geopandas and matplotlib are test
-and benchmark tools (the `test` extra), never imported by the package."""
+"""gsgeo runs with its declared run-time dependencies only: geopandas is a test tool (the `test`
+extra), never imported by the package; matplotlib, jinja2 and WeasyPrint draw and lay out the
+survey report and are run-time dependencies."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import textwrap
+import tomllib
 
 from conftest import REPO
 
-BLOCKED = ("geopandas", "matplotlib")
+BLOCKED = ("geopandas",)
 
 SCRIPT = textwrap.dedent("""
     import importlib, pkgutil, sys, tempfile
@@ -37,9 +40,19 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_the_package_needs_neither_geopandas_nor_matplotlib():
+def test_the_package_does_not_need_geopandas():
     script = SCRIPT.format(blocked=set(BLOCKED), session=str(REPO / "examples" / "session.json"))
     run = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True,
                          timeout=120)
     assert run.returncode == 0, run.stderr[-3000:]
     assert "check points read back" in run.stdout
+
+
+def test_the_report_libraries_are_run_time_dependencies():
+    doc = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))
+    names = {re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0].lower()
+             for d in doc["project"]["dependencies"]}
+    extra = {re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0].lower()
+             for d in doc["project"]["optional-dependencies"]["test"]}
+    assert {"matplotlib", "jinja2", "weasyprint"} <= names
+    assert "matplotlib" not in extra and "geopandas" in extra

@@ -71,8 +71,8 @@ def offenders(source: str, forbidden: tuple[str, ...], allowed: tuple[str, ...] 
 
 
 LAYERS = ("gsgeo.solve", "gsgeo.crs", "gsgeo.measure", "gsgeo.session", "gsgeo.export",
-          "gsgeo.georef", "gsgeo.tiles", "gsgeo.store", "gsgeo.service", "gsgeo.server", "gsgeo.commands",
-          "gsgeo.demo", "gsgeo.cli")
+          "gsgeo.georef", "gsgeo.report", "gsgeo.tiles", "gsgeo.store", "gsgeo.service",
+          "gsgeo.server", "gsgeo.commands", "gsgeo.demo", "gsgeo.cli")
 
 
 def test_solve_imports_no_other_layer():
@@ -97,6 +97,14 @@ def test_georef_imports_nothing_above_it():
     assert offenders("gsgeo.georef", ("gsgeo.session", "gsgeo.store", "gsgeo.export",
                                       "gsgeo.tiles", "gsgeo.server", "gsgeo.service",
                                       "gsgeo.commands", "gsgeo.demo", "gsgeo.cli")) == []
+
+
+def test_report_renders_data_and_sits_below_the_service():
+    """gsgeo.report renders the plain data gsgeo.service.reporting gathers, beside export."""
+    assert offenders("gsgeo.report", ("gsgeo.service", "gsgeo.server", "gsgeo.commands",
+                                      "gsgeo.cli", "gsgeo.store", "gsgeo.session",
+                                      "gsgeo.export", "gsgeo.tiles", "gsgeo.demo",
+                                      "gsgeo.georef")) == []
 
 
 def test_store_is_persistence_only():

@@ -1,0 +1,67 @@
+"""`gsgeo report PROJECT -o REPORT.pdf|REPORT.html`: a project's survey report.
+
+Reads the project from the store of ``--data`` (as `gsgeo serve` does), gathers it through
+gsgeo.service.reporting and renders it with gsgeo.report. The format comes from the output
+suffix; the file is written atomically, so a failure leaves an earlier report intact.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from gsgeo.errors import InputError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "report",
+        help="write a project's survey report (PDF or HTML)",
+        description="Write one self-contained survey report of a project: reference frames "
+                    "and datum operation, the scene's georeference with its control "
+                    "residuals, accuracy against check points (ASPRS Positional Accuracy "
+                    "Standards, Edition 2, 2023) and the measured points with their sigmas.",
+    )
+    p.add_argument("project", help="project id (as listed by GET /api/projects)")
+    p.add_argument("-o", "--output", required=True, metavar="REPORT.pdf|REPORT.html",
+                   help="output file; the format comes from the suffix (.pdf, .html, .htm)")
+    p.add_argument("--data", default="gsgeo-data", metavar="DIR",
+                   help="data directory with the project store (default: ./gsgeo-data, as "
+                        "for gsgeo serve)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from gsgeo.export.atomic import atomic_path, check_target
+    from gsgeo.report import FORMATS, format_from_suffix, render
+
+    fmt = format_from_suffix(args.output)
+    if fmt is None:
+        known = ", ".join(s for sfx in FORMATS.values() for s in sfx)
+        suffix = Path(args.output).suffix
+        what = f"unknown report format '{suffix}'" if suffix else "no suffix to tell the format"
+        raise InputError(f"-o {args.output}: {what}; use one of {known}")
+    check_target(args.output)
+    data_dir = Path(args.data)
+    from gsgeo.store import DB_NAME
+
+    if not (data_dir / DB_NAME).is_file():
+        raise InputError(f"--data {data_dir}: no project store ({DB_NAME}) there; "
+                         "gsgeo serve or gsgeo demo creates one")
+    from gsgeo.service import open_projects
+    from gsgeo.service.reporting import report_data
+
+    t0 = time.perf_counter()
+    projects = open_projects(data_dir)
+    try:
+        data = report_data(projects, args.project)
+    finally:
+        projects.store.close()
+    body = render(data, fmt)
+    with atomic_path(args.output) as tmp:
+        tmp.write_bytes(body)
+    print(f"gsgeo report: wrote {args.output} ({fmt}, {len(body)} bytes, "
+          f"{len(data['points'])} points) in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    return 0

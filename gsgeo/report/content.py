@@ -1,0 +1,460 @@
+"""The survey report's content: report data (gsgeo.service.reporting's JSON) -> sections.
+
+A :class:`Report` is a title, a summary and sections of blocks (facts, tables, figures,
+notes), every value already formatted as text. HTML and PDF are both rendered from it, so
+they cannot differ. Coordinates are shown in the grid CRS's units with 3 decimals;
+sigmas, residuals and accuracy figures in millimetres with 1 decimal (``fmt_mm``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from gsgeo.jsontypes import JSON, JSONObject
+from gsgeo.report import plots
+
+DASH = "—"
+
+
+# formatting ---------------------------------------------------------------------------------
+def _num(v: JSON) -> float | None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    return float(v) if math.isfinite(v) else None
+
+
+def fmt_mm(v: JSON, decimals: int = 1, signed: bool = False) -> str:
+    """Metres as millimetres (``12.3``); a dash when unknown."""
+    x = _num(v)
+    if x is None:
+        return DASH
+    return f"{x * 1000:{'+' if signed else ''}.{decimals}f}"
+
+
+def fmt_m(v: JSON, decimals: int = 3) -> str:
+    """A coordinate or length with ``decimals`` decimals; a dash when unknown."""
+    x = _num(v)
+    return DASH if x is None else f"{x:.{decimals}f}"
+
+
+def fmt_g(v: JSON, digits: int = 4) -> str:
+    """A plain number with ``digits`` significant digits; a dash when unknown."""
+    x = _num(v)
+    return DASH if x is None else f"{x:.{digits}g}"
+
+
+def fmt_text(v: JSON) -> str:
+    return DASH if v is None or v == "" else str(v)
+
+
+# blocks -------------------------------------------------------------------------------------
+@dataclass
+class Facts:
+    """Label/value pairs."""
+
+    rows: list[tuple[str, str]]
+    kind: str = "facts"
+
+
+@dataclass
+class Table:
+    """A table of text cells; ``numeric`` columns are right-aligned; ``row_classes`` mark
+    rows ("outlier", "excluded", "failed" or "")."""
+
+    columns: list[str]
+    rows: list[list[str]]
+    numeric: list[bool]
+    row_classes: list[str] = field(default_factory=list)
+    caption: str = ""
+    kind: str = "table"
+
+
+@dataclass
+class Figure:
+    """A figure as a data URI (SVG), with its caption."""
+
+    src: str
+    caption: str
+    kind: str = "figure"
+
+
+@dataclass
+class Notes:
+    """A list of sentences: ``style`` "remark", "warning" or "formula"."""
+
+    items: list[str]
+    style: str = "remark"
+    title: str = ""
+    kind: str = "notes"
+
+
+Block = Facts | Table | Figure | Notes
+
+
+@dataclass
+class Section:
+    title: str
+    anchor: str
+    blocks: list[Block]
+
+
+@dataclass
+class Report:
+    """The whole document."""
+
+    title: str
+    subtitle: str
+    generated: str
+    summary: Facts
+    sections: list[Section]
+
+
+def _table(columns: Sequence[tuple[str, bool]], rows: list[list[str]],
+           row_classes: list[str] | None = None, caption: str = "") -> Table:
+    return Table([c for c, _ in columns], rows, [n for _, n in columns],
+                 row_classes or [""] * len(rows), caption)
+
+
+# sections -----------------------------------------------------------------------------------
+def _unit(data: JSONObject) -> str:
+    grid = (data.get("frames") or {}).get("grid_crs") or {}
+    return str(grid.get("unit") or "metre")
+
+
+def _project_section(data: JSONObject) -> Section:
+    p = data["project"]
+    rows = [("Project", f"{p['name']} ({p['id']})"),
+            ("Description", fmt_text(p.get("description"))),
+            ("Scene", fmt_text(p.get("scene"))),
+            ("Aiming precision σpx", f"{fmt_g(p.get('sigma_px'))} px"),
+            ("Settings revision", fmt_text(p.get("settings_rev"))),
+            ("Created", fmt_text(p.get("created_at"))),
+            ("Last changed", fmt_text(p.get("updated_at")))]
+    return Section("Project", "project", [Facts(rows)])
+
+
+def _crs_line(facts: JSON) -> str:
+    if not facts:
+        return DASH
+    if facts.get("error"):
+        return f"{facts['code']} ({facts['error']})"
+    extra = ", ".join(str(facts[k]) for k in ("datum", "projection") if facts.get(k))
+    return f"{facts['code']} {facts.get('name') or ''}" + (f" ({extra})" if extra else "")
+
+
+def _frames_section(data: JSONObject) -> Section:
+    p, f = data["project"], data.get("frames") or {}
+    rows = [("Scene frame (source CRS)", _crs_line(f.get("source_crs"))),
+            ("Grid CRS", _crs_line(f.get("grid_crs")) if p.get("crs") else
+             "none: points stay in the scene's frame; no grid coordinates, no accuracy test"),
+            ("Area of use", fmt_text((f.get("grid_crs") or {}).get("area_of_use"))),
+            ("Vertical datum", _crs_line(f.get("vertical_crs")) if p.get("vertical") else
+             (f"geoid grid {p['geoid']}" if p.get("geoid") else
+              "ellipsoidal heights (no geoid applied)"))]
+    blocks: list[Block] = [Facts(rows)]
+    ops = f.get("operations") or []
+    if ops:
+        blocks.append(_table(
+            [("Datum operation used (PROJ)", False), ("Stated accuracy [m]", True),
+             ("Points", True)],
+            [[str(o["operation"]), "unknown (ballpark)" if o.get("accuracy_m") is None
+              else fmt_g(o["accuracy_m"]), str(o["points"])] for o in ops],
+            caption="The operation's accuracy is a systematic offset shared by the whole "
+                    "scene; it is not part of the points' sigmas."))
+    heights = f.get("heights") or []
+    if heights:
+        blocks.append(_table(
+            [("Height type", False), ("Vertical datum / geoid", False), ("Points", True)],
+            [[fmt_text(h.get("height_type")), fmt_text(h.get("vertical_datum")),
+              str(h["points"])] for h in heights]))
+    return Section("Reference frames", "frames", blocks)
+
+
+def _control_style(c: JSONObject) -> str:
+    if c.get("outlier"):
+        return "outlier"
+    if c.get("excluded") or not c.get("used", True):
+        return "excluded"
+    return "control"
+
+
+def _rmse_rows(label: str, r: JSON) -> list[str]:
+    if not r:
+        return [label, "0", DASH, DASH, DASH, DASH, DASH]
+    return [label, fmt_text(r.get("count")), fmt_mm(r.get("e")), fmt_mm(r.get("n")),
+            fmt_mm(r.get("horizontal")), fmt_mm(r.get("h")), fmt_mm(r.get("3d"))]
+
+
+def _rotation_angle(rot: JSON) -> str:
+    try:
+        tr = float(rot[0][0]) + float(rot[1][1]) + float(rot[2][2])
+    except (TypeError, IndexError, ValueError):
+        return DASH
+    return f"{math.degrees(math.acos(max(-1.0, min(1.0, (tr - 1) / 2)))):.6f}°"
+
+
+def _georef_blocks(status: JSONObject) -> list[Block]:
+    blocks: list[Block] = []
+    rows = [("Scene", fmt_text(status.get("scene"))),
+            ("Georeference version", fmt_text(status.get("version"))),
+            ("Georeferenced", "yes" if status.get("georeferenced") else
+             "NO: the scene sits at the default origin (lat 0, lon 0)")]
+    g = status.get("current")
+    if not g:
+        blocks.append(Facts(rows))
+        blocks.append(Notes(["No fit by control points has been applied to this scene."]))
+        return blocks
+    rows += [("Fit", "scale only" if g.get("kind") == "scale" else
+              "7-parameter similarity (3-D Helmert), weighted least squares"),
+             ("Applied to the scene", "yes" if status.get("current_applied", True) else
+              "no (a proposed fit)"),
+             ("Control in", fmt_text(g.get("grid_crs") or "local ENU")),
+             ("σ0 (a-posteriori)", fmt_g(g.get("sigma0"))),
+             ("Degrees of freedom", fmt_text(g.get("dof"))),
+             ("Global test p-value", fmt_g(g.get("global_test_p"), 3))]
+    blocks.append(Facts(rows))
+    t = g.get("translation") or [None] * 3
+    ts = g.get("translation_sigma") or [None] * 3
+    rs = g.get("rotation_sigma_deg") or [None] * 3
+    params = [["scale", fmt_g(g.get("scale"), 10), fmt_g(g.get("scale_sigma"), 3),
+               f"{fmt_g(g.get('scale_ppm'), 4)} ppm"]]
+    params += [[f"translation {a} (ECEF)", fmt_m(t[i], 4), fmt_mm(ts[i]) + " mm", "m"]
+               for i, a in enumerate("XYZ")]
+    params += [[f"rotation about ECEF {a}", DASH,
+                DASH if _num(rs[i]) is None else f"{float(rs[i]) * 3600:.3f}″", "small angle"]
+               for i, a in enumerate("XYZ")]
+    params.append(["rotation angle (total)", _rotation_angle(g.get("rotation")), DASH, ""])
+    blocks.append(_table([("Parameter", False), ("Value", True), ("σ", True), ("", False)],
+                         params, caption="Similarity y = s·R·x + t, old ECEF -> new ECEF."))
+    rot = g.get("rotation")
+    if rot:
+        blocks.append(_table([("R", False), ("", True), ("", True), ("", True)],
+                             [[f"row {i + 1}", *(f"{float(x):.9f}" for x in r)]
+                              for i, r in enumerate(rot)], caption="Rotation matrix"))
+    control = g.get("control") or []
+    if control:
+        cols = [("Control", False), ("Status", False), ("dE [mm]", True), ("dN [mm]", True),
+                ("dH [mm]", True), ("w", True), ("p", True), ("σh [mm]", True),
+                ("σv [mm]", True)]
+        rws, classes = [], []
+        for c in control:
+            style = _control_style(c)
+            rws.append([str(c.get("id")), {"control": "used", "excluded": "excluded",
+                                           "outlier": "OUTLIER"}[style],
+                        fmt_mm(c.get("dE"), signed=True), fmt_mm(c.get("dN"), signed=True),
+                        fmt_mm(c.get("dH"), signed=True), fmt_g(c.get("w"), 3),
+                        fmt_g(c.get("p"), 3), fmt_mm(c.get("sigma_h")),
+                        fmt_mm(c.get("sigma_v"))])
+            classes.append("" if style == "control" else style)
+        blocks.append(_table(cols, rws, classes, "Control residuals: control minus fitted, "
+                             "in the grid; w is the data-snooping test statistic, p its "
+                             "p-value."))
+    check = g.get("check") or []
+    if check:
+        blocks.append(_table(
+            [("Check", False), ("dE [mm]", True), ("dN [mm]", True), ("dH [mm]", True)],
+            [[str(c.get("id")), fmt_mm(c.get("dE"), signed=True),
+              fmt_mm(c.get("dN"), signed=True), fmt_mm(c.get("dH"), signed=True)]
+             for c in check], caption="Check points of the fit (never in the fit)."))
+    vectors = [plots.Vector(str(c.get("id")), _f(c.get("easting")), _f(c.get("northing")),
+                            _f(c.get("dE")), _f(c.get("dN")), _f(c.get("dH")),
+                            _control_style(c)) for c in control]
+    vectors += [plots.Vector(str(c.get("id")), _f(c.get("easting")), _f(c.get("northing")),
+                             _f(c.get("dE")), _f(c.get("dN")), _f(c.get("dH")), "check")
+                for c in check]
+    src = plots.residual_plan(vectors, "Georeference residuals (control minus fitted)")
+    if src:
+        blocks.append(Figure(src, "Horizontal residual vectors on a plan (exaggerated; "
+                                  "labels give dH in mm). Outliers in red, excluded control "
+                                  "in grey, check points as triangles."))
+    blocks.append(_table(
+        [("RMSE", False), ("n", True), ("E [mm]", True), ("N [mm]", True),
+         ("horizontal [mm]", True), ("H [mm]", True), ("3-D [mm]", True)],
+        [_rmse_rows("control", g.get("rmse_control")),
+         _rmse_rows("check", g.get("rmse_check"))]))
+    if g.get("outliers"):
+        blocks.append(Notes([f"Outlier{'s' if len(g['outliers']) > 1 else ''} flagged by "
+                             f"data snooping: {', '.join(map(str, g['outliers']))}."],
+                            "warning"))
+    wo = g.get("without_outliers")
+    if wo:
+        blocks.append(_table(
+            [("Without", False), ("scale", True), ("RMSE control H [mm]", True),
+             ("RMSE control 3-D [mm]", True), ("RMSE check 3-D [mm]", True)],
+            [[", ".join(map(str, wo.get("excluded") or [])) or DASH,
+              fmt_g(wo.get("scale"), 10),
+              fmt_mm((wo.get("rmse_control") or {}).get("horizontal")),
+              fmt_mm((wo.get("rmse_control") or {}).get("3d")),
+              fmt_mm((wo.get("rmse_check") or {}).get("3d"))]],
+            caption="The same fit without the flagged points (the user decides)."))
+    if g.get("warnings"):
+        blocks.append(Notes([str(w) for w in g["warnings"]], "warning", "Warnings of the fit"))
+    history = status.get("history") or []
+    if history:
+        blocks.append(_table([("Version", True), ("Kind", False), ("At", False),
+                              ("Parent", True)],
+                             [[fmt_text(h.get("version")), fmt_text(h.get("kind")),
+                               fmt_text(h.get("at")), fmt_text(h.get("parent"))]
+                              for h in history], caption="Georeference history of the scene"))
+    return blocks
+
+
+def _f(v: JSON) -> float:
+    x = _num(v)
+    return math.nan if x is None else x
+
+
+def _georef_section(data: JSONObject) -> Section:
+    geo = data.get("georeference") or {}
+    status = geo.get("status")
+    if not status:
+        return Section("Georeference", "georeference",
+                       [Notes([str(geo.get("note") or "no georeference information")])])
+    return Section("Georeference", "georeference", _georef_blocks(status))
+
+
+def _accuracy_section(data: JSONObject) -> Section:
+    acc = data.get("accuracy") or {}
+    asprs = acc.get("asprs")
+    if not asprs:
+        return Section("Accuracy against check points", "accuracy",
+                       [Notes([str(acc.get("note") or "no check points")])])
+    s = asprs["statistics"]
+    blocks: list[Block] = [Notes([f"Per the {asprs['standard']}. Differences are measured "
+                                  "minus check point, in the grid; check points never enter "
+                                  "the georeference."])]
+    stats = [
+        ["E", str(s["n_horizontal"]), fmt_mm(s["ME_E"], signed=True), fmt_mm(s["SD_E"]),
+         fmt_mm(s["RMSE_E"])],
+        ["N", str(s["n_horizontal"]), fmt_mm(s["ME_N"], signed=True), fmt_mm(s["SD_N"]),
+         fmt_mm(s["RMSE_N"])],
+        ["V (height)", str(s["n_vertical"]), fmt_mm(s["ME_V"], signed=True),
+         fmt_mm(s["SD_V"]), fmt_mm(s["RMSE_V1"])],
+    ]
+    blocks.append(_table([("Component", False), ("n", True), ("ME [mm]", True),
+                          ("SD [mm]", True), ("RMSE [mm]", True)], stats,
+                         caption="Product against check points, per component."))
+    summary = [
+        ["RMSE_H1 (radial, product vs check points)", fmt_mm(s["RMSE_H1"])],
+        ["RMSE_H2 (check point survey, horizontal)",
+         fmt_mm(s["RMSE_H2"]) + (f" (n = {s['n_survey_horizontal']})"
+                                 if s["n_survey_horizontal"] else " (not stated)")],
+        ["RMSE_H (horizontal accuracy)", fmt_mm(s["RMSE_H"])],
+        ["RMSE_V1 (product vs check points)", fmt_mm(s["RMSE_V1"])],
+        ["RMSE_V2 (check point survey, vertical)",
+         fmt_mm(s["RMSE_V2"]) + (f" (n = {s['n_survey_vertical']})"
+                                 if s["n_survey_vertical"] else " (not stated)")],
+        ["RMSE_V (vertical accuracy)", fmt_mm(s["RMSE_V"])],
+        ["RMSE_3D (three-dimensional accuracy)", fmt_mm(s["RMSE_3D"])],
+        ["Horizontal accuracy at 95 % (NSSDA, 1.7308 × RMSE_H)", fmt_mm(s["ACC_H95"])],
+        ["Vertical accuracy at 95 % (NSSDA, 1.96 × RMSE_V)", fmt_mm(s["ACC_V95"])],
+    ]
+    blocks.append(_table([("Statistic", False), ("Value [mm]", True)], summary,
+                         caption="ASPRS Edition 2 accuracy statistics."))
+    blocks.append(Notes(list(asprs["formulas"]), "formula", "Formulas"))
+    blocks.append(Notes(list(asprs["remarks"]), "remark", "Remarks"))
+    pts = acc.get("points") or []
+    blocks.append(_table(
+        [("Check point", False), ("E", True), ("N", True), ("dE [mm]", True),
+         ("dN [mm]", True), ("dH [mm]", True), ("2-D [mm]", True), ("3-D [mm]", True),
+         ("survey σh [mm]", True), ("survey σv [mm]", True)],
+        [[str(r["id"]), fmt_m(r.get("easting")), fmt_m(r.get("northing")),
+          fmt_mm(r.get("dE"), signed=True), fmt_mm(r.get("dN"), signed=True),
+          fmt_mm(r.get("dH"), signed=True), fmt_mm(r.get("d2D")), fmt_mm(r.get("d3D")),
+          fmt_mm(r.get("survey_sigma_h")), fmt_mm(r.get("survey_sigma_v"))] for r in pts],
+        caption="Check points: measured minus check."))
+    vectors = [plots.Vector(str(r["id"]), _f(r.get("easting")), _f(r.get("northing")),
+                            _f(r.get("dE")), _f(r.get("dN")), _f(r.get("dH")), "check")
+               for r in pts]
+    src = plots.residual_plan(vectors, "Check point residuals (measured minus check)")
+    if src:
+        blocks.append(Figure(src, "Horizontal differences at the check points "
+                                  "(exaggerated; labels give dH in mm)."))
+    src = plots.height_residuals([str(r["id"]) for r in pts], [r.get("dH") for r in pts],
+                                 ["check"] * len(pts), "Height differences at check points")
+    if src:
+        blocks.append(Figure(src, "dH per check point, measured minus check."))
+    counts = acc.get("counts") or {}
+    missing = counts.get("check_points_not_measured") or []
+    if missing:
+        blocks.append(Notes([f"Check points not measured ({len(missing)}): "
+                             + ", ".join(map(str, missing[:50]))
+                             + (" …" if len(missing) > 50 else "")]))
+    if acc.get("heights"):
+        blocks.append(Notes([str(acc["heights"])]))
+    return Section("Accuracy against check points", "accuracy", blocks)
+
+
+def _points_section(data: JSONObject) -> Section:
+    pts = data.get("points") or []
+    failed = data.get("failed_points") or []
+    unit = _unit(data)
+    blocks: list[Block] = []
+    if pts:
+        src = plots.points_plan([str(r["point_id"]) for r in pts],
+                                [_f(r.get("easting")) for r in pts],
+                                [_f(r.get("northing")) for r in pts],
+                                [_num(r.get("sigma_e")) for r in pts],
+                                [_num(r.get("sigma_n")) for r in pts], "Measured points")
+        if src:
+            blocks.append(Figure(src, "Measured points on a plan, coloured by their total "
+                                      "horizontal 1σ."))
+        blocks.append(_table(
+            [("Point", False), ("Code", False), (f"E [{unit}]", True), (f"N [{unit}]", True),
+             (f"H [{unit}]", True), ("σE [mm]", True), ("σN [mm]", True), ("σH [mm]", True),
+             ("σE meas [mm]", True), ("σN meas [mm]", True), ("σH meas [mm]", True),
+             ("rays", True),
+             ("σ0", True)],
+            [[str(r["point_id"]), fmt_text(r.get("code")) if r.get("code") else "",
+              fmt_m(r.get("easting")), fmt_m(r.get("northing")), fmt_m(r.get("height")),
+              fmt_mm(r.get("sigma_e")), fmt_mm(r.get("sigma_n")), fmt_mm(r.get("sigma_h")),
+              fmt_mm(r.get("sigma_e_meas")), fmt_mm(r.get("sigma_n_meas")),
+              fmt_mm(r.get("sigma_h_meas")), fmt_text(r.get("n_rays")),
+              fmt_g(r.get("sigma0"), 3)] for r in pts],
+            caption="1σ in millimetres: total (aiming and georeference) and measurement-only "
+                    "(aiming alone)."))
+    else:
+        blocks.append(Notes(["No point has grid coordinates."]))
+    if failed:
+        blocks.append(_table([("Point", False), ("Not solved because", False)],
+                             [[str(r["point_id"]), str(r["error"])] for r in failed],
+                             ["failed"] * len(failed)))
+    return Section(f"Measured points ({len(pts)})", "points", blocks)
+
+
+def _summary(data: JSONObject) -> Facts:
+    p = data["project"]
+    acc = (data.get("accuracy") or {}).get("asprs")
+    geo = ((data.get("georeference") or {}).get("status") or {})
+    rows: list[tuple[str, str]] = [
+        ("Project", str(p["name"])), ("Scene", fmt_text(p.get("scene"))),
+        ("Grid CRS", fmt_text(p.get("crs"))),
+        ("Points measured", str(len(data.get("points") or []))),
+        ("Scene georeferenced", DASH if not geo else ("yes" if geo.get("georeferenced")
+                                                       else "NO (default origin)")),
+    ]
+    if acc:
+        s = acc["statistics"]
+        rows += [("Check points (H / V)", f"{s['n_horizontal']} / {s['n_vertical']}"),
+                 ("RMSE_H / RMSE_V / RMSE_3D",
+                  f"{fmt_mm(s['RMSE_H'])} / {fmt_mm(s['RMSE_V'])} / {fmt_mm(s['RMSE_3D'])} mm")]
+    else:
+        rows.append(("Accuracy", "not tested against check points"))
+    return Facts(rows)
+
+
+def build_report(data: JSONObject) -> Report:
+    """The report's content from gsgeo.service.reporting's data."""
+    p = data["project"]
+    gen: dict[str, Any] = data.get("generated") or {}
+    return Report(
+        title=f"Survey report: {p['name']}",
+        subtitle="Point measurement in a 3D Gaussian Splatting scene by multi-ray intersection",
+        generated=f"{gen.get('at', '')} by {gen.get('by', 'gsgeo')}",
+        summary=_summary(data),
+        sections=[_project_section(data), _frames_section(data), _georef_section(data),
+                  _accuracy_section(data), _points_section(data)],
+    )

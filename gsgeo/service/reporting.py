@@ -1,0 +1,183 @@
+"""The survey report's data: one project gathered from a :class:`Projects` service.
+
+:func:`report_data` returns a plain JSON object (no store records, no numpy) that
+gsgeo.report renders as HTML or PDF: the project and its solving settings, the reference
+frames (grid CRS, the datum operation the points took with its stated accuracy, the vertical
+datum or geoid), the scene's georeference (the applied fit with its control residuals, when
+the service knows it), the accuracy against independent check points per ASPRS Edition 2
+(gsgeo.measure.accuracy.asprs_accuracy) and the measured points with their total and
+measurement-only sigmas. Coordinates are in the project's grid (its units), sigmas and
+differences in metres.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from datetime import UTC, datetime
+from typing import Any
+
+import numpy as np
+
+from gsgeo import __version__
+from gsgeo.errors import GsgeoError
+from gsgeo.jsontypes import JSONObject
+from gsgeo.measure.accuracy import asprs_accuracy
+from gsgeo.service.measuring import json_ready
+from gsgeo.service.projects import Projects
+from gsgeo.store.records import CheckPointRecord, PointRecord, Project
+
+#: Point-schema columns of the measured-points table, in order.
+POINT_COLUMNS = ("point_id", "code", "easting", "northing", "height", "sigma_e", "sigma_n",
+                 "sigma_h", "sigma_e_meas", "sigma_n_meas", "sigma_h_meas", "n_rays", "sigma0",
+                 "max_angle_deg")
+
+
+def _now() -> str:
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def _crs_facts(code: str | None, source: str) -> JSONObject | None:
+    """Name, datum, ellipsoid, projection of a CRS (None without one; an ``error`` entry
+    when PROJ cannot describe it)."""
+    if not code:
+        return None
+    from gsgeo.crs.discovery import describe_crs
+
+    try:
+        d = describe_crs(code, source)
+    except GsgeoError as exc:
+        return {"code": code, "error": str(exc)}
+    axes = d.get("axes") or [{}]
+    return {k: d.get(k) for k in ("code", "name", "type", "datum", "ellipsoid", "projection")} \
+        | {"area_of_use": (d.get("area_of_use") or {}).get("name"), "unit": axes[0].get("unit")}
+
+
+def _frames(p: Project, points: list[PointRecord]) -> JSONObject:
+    """Reference frames: the CRSs and what the measured points actually went through."""
+    recs = [q.record for q in points if q.record is not None]
+    ops = Counter((r.get("operation"), r.get("operation_accuracy_m")) for r in recs
+                  if r.get("operation"))
+    heights = Counter((r.get("height_type"), r.get("vertical_datum")) for r in recs)
+    return {
+        "source_crs": _crs_facts(p.source_crs, p.source_crs),
+        "grid_crs": _crs_facts(p.crs, p.source_crs),
+        "vertical_crs": _crs_facts(p.vertical, p.source_crs),
+        "geoid": p.geoid,
+        "operations": [{"operation": op, "accuracy_m": acc, "points": n}
+                       for (op, acc), n in ops.most_common()],
+        "heights": [{"height_type": ht, "vertical_datum": vd, "points": n}
+                    for (ht, vd), n in heights.most_common()],
+    }
+
+
+def _georeference(svc: Projects, pid: str, fit: JSONObject | None) -> JSONObject:
+    """The scene's georeference as the service reports it: {"status": ..., "note": ...}.
+
+    ``fit``: a georeference result to report instead of the applied one (e.g. a fit just
+    computed and not applied); ``status["current_applied"]`` says which it is.
+    ``Projects.georeference_status`` exists once georeferencing by control points is part of
+    the service; without it (or when the project cannot have one) the note says why.
+    """
+    status_of = getattr(svc, "georeference_status", None)
+    status: JSONObject | None = None
+    note = None
+    if status_of is None:
+        note = "this gsgeo has no georeferencing by control points"
+    else:
+        try:
+            status = dict(status_of(pid))
+        except GsgeoError as exc:
+            note = str(exc)
+    if fit is not None:
+        status = (status or {}) | {"current": fit, "current_applied": bool(fit.get("applied"))}
+        note = None
+    elif status is not None:
+        status["current_applied"] = True
+    return {"status": status, "note": note}
+
+
+def _check_sigmas(cps: list[CheckPointRecord], ids: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    by_id = {c.id: c for c in cps if c.role == "check"}
+
+    def val(v: float | None) -> float:
+        return math.nan if v is None else float(v)
+
+    return (np.array([val(by_id[i].sigma_h) if i in by_id else math.nan for i in ids]),
+            np.array([val(by_id[i].sigma_v) if i in by_id else math.nan for i in ids]))
+
+
+def _accuracy(svc: Projects, pid: str, p: Project, cps: list[CheckPointRecord],
+              records: dict[str, JSONObject]) -> JSONObject:
+    """Measured minus check per point (with the point's grid position, for the plan) and the
+    ASPRS Edition 2 statistics; ``note`` says why there are none."""
+    if not any(c.role == "check" for c in cps):
+        return {"points": [], "asprs": None, "counts": None,
+                "note": "no check points (role 'check') in this project"}
+    if p.crs is None:
+        return {"points": [], "asprs": None, "counts": None,
+                "note": "the project has no grid CRS to compare check points in"}
+    try:
+        acc = svc.accuracy(pid, "check")
+    except GsgeoError as exc:
+        return {"points": [], "asprs": None, "counts": None, "note": str(exc)}
+    rows = acc.get("points") or []
+    ids = [str(r["id"]) for r in rows]
+    d = np.array([[math.nan if r.get(k) is None else float(r[k]) for k in ("dE", "dN", "dH")]
+                  for r in rows], dtype=float).reshape(-1, 3)
+    sh, sv = _check_sigmas(cps, ids)
+    for r, s_h, s_v in zip(rows, sh, sv, strict=True):
+        rec = records.get(str(r["id"])) or {}
+        r["easting"], r["northing"] = rec.get("easting"), rec.get("northing")
+        r["survey_sigma_h"] = None if math.isnan(s_h) else float(s_h)
+        r["survey_sigma_v"] = None if math.isnan(s_v) else float(s_v)
+    asprs = asprs_accuracy(d, sh, sv) if rows else None
+    note = None if rows else "no measured point has the id of a check point"
+    return {"points": rows, "asprs": asprs, "counts": acc.get("counts"), "note": note,
+            "heights": acc.get("heights")}
+
+
+def _point_rows(points: list[PointRecord]) -> tuple[list[JSONObject], list[JSONObject]]:
+    """(solved rows with POINT_COLUMNS, failed points with their reason)."""
+    solved: list[JSONObject] = []
+    failed: list[JSONObject] = []
+    for q in points:
+        if q.record is None or q.record.get("easting") is None:
+            failed.append({"point_id": q.id, "code": q.code,
+                           "error": q.error or "no grid coordinates (the project has no grid CRS)"})
+            continue
+        solved.append({k: q.record.get(k) for k in POINT_COLUMNS})
+    return solved, failed
+
+
+def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
+                georeference: JSONObject | None = None) -> JSONObject:
+    """Everything the survey report of project ``pid`` shows, as plain JSON.
+
+    ``georeference``: a GeorefResult to show instead of the scene's applied one (a fit not
+    yet applied). Raises NotFoundError for an unknown project. Parts that cannot be computed
+    (no grid, no check points, no georeference) carry a ``note`` instead of failing.
+    """
+    p = svc.get_project(pid)
+    points = svc.list_points(pid)
+    cps = svc.list_check_points(pid)
+    records = {q.id: q.record for q in points if q.record is not None}
+    solved, failed = _point_rows(points)
+    control = [c for c in cps if c.role == "control"]
+    doc: dict[str, Any] = {
+        "generated": {"at": generated_at or _now(), "by": f"gsgeo {__version__}"},
+        "project": {"id": p.id, "name": p.name, "description": p.description,
+                    "scene": p.scene, "crs": p.crs, "vertical": p.vertical, "geoid": p.geoid,
+                    "source_crs": p.source_crs, "sigma_px": p.sigma_px,
+                    "settings_rev": p.settings_rev, "created_at": p.created_at,
+                    "updated_at": p.updated_at},
+        "frames": _frames(p, points),
+        "georeference": _georeference(svc, pid, georeference),
+        "accuracy": _accuracy(svc, pid, p, cps, records),
+        "points": solved,
+        "failed_points": failed,
+        "check_points": {"check": sum(1 for c in cps if c.role == "check"),
+                         "control": len(control)},
+    }
+    return dict(json_ready(doc))
+
