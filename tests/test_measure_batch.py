@@ -345,6 +345,23 @@ def test_points_outside_the_grid_area_and_far_apart_warn_per_point(fallbacks):
     assert [g.point_id for g in outside] == ["FR0", "FR1", "FR2", "FR3"]
 
 
+def test_points_whose_centroid_lies_where_none_of_them_does_are_not_one_call(fallbacks):
+    """West of Ireland and in the North Sea: each outside every real OSGB36 operation's area
+    of use (measure_point falls back to PROJ's ballpark and says so), while their centroid
+    lies inside them."""
+    rng = np.random.default_rng(11)
+    points = make_points(rng, 3, lon=-10.0, lat=55.0, prefix="W") + make_points(
+        rng, 3, lon=3.5, lat=55.0, prefix="E")
+    settings = SolveSettings(crs="EPSG:27700")
+    got = measure_batch(points, settings)
+    assert fallbacks == []
+    for g, r in zip(got, reference(points, settings), strict=True):
+        assert_same(g, r)
+        assert isinstance(g, Measurement)
+        assert g.grid is not None and "Ballpark" in g.grid.operation
+        assert any("unknown accuracy" in w for w in g.warnings)
+
+
 def write_geoid(path: Path) -> Path:
     """A flat 45 m geoid over lon -2..-1, lat 52..53 (EPSG:4326)."""
     res = 0.01

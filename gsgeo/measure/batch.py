@@ -509,6 +509,7 @@ class _GridCalls:
         u = starts.shape[0]
         self.starts, self.counts = starts, counts
         self.calls: list[GridPoints] = []
+        self.warnings: list[list[str]] = []  # each call's, as a one-unit call gives them
         self.call = np.full(u, -1)  # index into calls; -1: the unit failed
         self.offset = np.zeros(u, dtype=np.int64)  # the unit's first row in its call
         self.errors: dict[int, GsgeoError] = {}
@@ -548,7 +549,7 @@ class _GridCalls:
                     sigma_e=sig[k][0], sigma_n=sig[k][1], sigma_h=sig[k][2],
                     ellipse_major_95=major[k], ellipse_minor_95=minor[k],
                     ellipse_bearing_deg=bearing[k], ellipsoid_axes_95=axes[k],
-                    warnings=list(gp.warnings))
+                    warnings=list(self.warnings[c]))
         return out, sig_meas
 
     def row_blocks(self) -> list[FloatArray | None]:
@@ -589,64 +590,74 @@ def _grid_many(rows: FloatArray, covs: FloatArray | None, counts: np.ndarray,
     lon, lat, _ = ecef_to_geodetic(rows, src.id)
     ulon = np.add.reduceat(lon, starts) / counts
     ulat = np.add.reduceat(lat, starts) / counts
-    kw = {"vertical": settings.vertical, "geoid": settings.geoid, "source_crs": src.id}
 
     def rows_of(units: np.ndarray) -> np.ndarray:
         c = counts[units]
         first = np.repeat(starts[units] - np.concatenate([[0], np.cumsum(c)[:-1]]), c)
         return first + np.arange(int(c.sum()))
 
-    def run(units: np.ndarray) -> None:
+    # The decisions of a call: each candidate operation's area of use at its centroid
+    # (horizontal, and vertical through PROJ), and per point the grid CRS's own area.
+    areas: list[object] = [t.area_of_use for t in
+                           candidates(src.geographic_3d_id, g.id).available]
+    comp = None
+    if g.vertical is not None and settings.geoid is None:
+        comp = _compound_text(rows, counts, settings, src)
+        if comp is not None:
+            areas += [t.area_of_use for t in candidates(src.geographic_3d_id, comp).available]
+
+    def key_at(lon_: FloatArray, lat_: FloatArray) -> np.ndarray:
+        return _area_masks(areas, lon_, lat_)
+
+    def run(units: np.ndarray, outside: bool) -> None:
+        """One call for these units (all with one key), split where it cannot stand for
+        each unit's own call. ``outside``: they lie outside the grid CRS's area of use,
+        whose warning counts a call's points, so the warnings come from a one-unit call."""
         rr = rows_of(units)
+        if units.size > 1 and (comp is None and g.vertical is not None and settings.geoid is None
+                               or not np.array_equal(
+                                   key_at(np.array([np.mean(lon[rr])]),
+                                          np.array([np.mean(lat[rr])]))[:, 0],
+                                   key_at(ulon[units[:1]], ulat[units[:1]])[:, 0])):
+            for u_i in units.tolist():  # its centroid would choose other operations
+                run(np.array([u_i]), outside)
+            return
         try:
             gp = to_grid_many(rows[rr], None if covs is None else covs[rr], settings.crs or "",
-                              **kw)  # type: ignore[arg-type]
+                              vertical=settings.vertical, geoid=settings.geoid,
+                              source_crs=src.id)
+            warnings = gp.warnings
+            if outside and units.size > 1:
+                one = rows_of(units[:1])
+                warnings = to_grid_many(rows[one], None if covs is None else covs[one],
+                                        settings.crs or "", vertical=settings.vertical,
+                                        geoid=settings.geoid, source_crs=src.id).warnings
         except GsgeoError as exc:
             if units.size == 1:
                 calls.errors[int(units[0])] = exc
                 return
             half = units.size // 2
-            run(units[:half])
-            run(units[half:])
+            run(units[:half], outside)
+            run(units[half:], outside)
             return
         calls.call[units] = len(calls.calls)
         calls.offset[units] = np.concatenate([[0], np.cumsum(counts[units])[:-1]])
         calls.calls.append(gp)
+        calls.warnings.append(warnings)
 
-    # The decisions of a call: each candidate operation's area of use at its centroid
-    # (horizontal, and vertical through PROJ), and per point the grid CRS's own area.
-    areas: list[object] = [t.area_of_use for t in
-                           candidates(src.geographic_3d_id, g.id).available]
-    if g.vertical is not None and settings.geoid is None:
-        comp = _compound_text(rows, counts, settings, src)
-        if comp is None:  # no unit could be transformed to learn it: each on its own
-            for u_i in range(counts.shape[0]):
-                run(np.array([u_i]))
-            return calls
-        areas += [t.area_of_use for t in candidates(src.geographic_3d_id, comp).available]
-    key = _area_masks(areas, ulon, ulat)
-    single = np.zeros(counts.shape[0], dtype=bool)
+    key = key_at(ulon, ulat)
+    outside = np.zeros(counts.shape[0], dtype=bool)
     if per_point_warnings and g.horizontal.area_of_use is not None:
-        # outside the grid CRS's area the warning counts the call's points: one call each
-        single = ~_area_masks([g.horizontal.area_of_use], ulon, ulat)[0]
-    for u_i in np.flatnonzero(single).tolist():
-        run(np.array([u_i]))
-    rest = np.flatnonzero(~single)
-    if rest.size:
-        if np.all(key[:, rest] == key[:, rest[:1]]):  # the usual case: one scene, one area
-            inverse = np.zeros(rest.size, dtype=np.int64)
-        else:
-            _, inverse = np.unique(key[:, rest], axis=1, return_inverse=True)
-        for k in range(int(inverse.max()) + 1):
-            units = rest[inverse.reshape(-1) == k]
-            rr = rows_of(units)
-            centre = _area_masks(areas, np.array([np.mean(lon[rr])]),
-                                 np.array([np.mean(lat[rr])]))[:, 0]
-            if units.size > 1 and not np.array_equal(centre, key[:, units[0]]):
-                for u_i in units.tolist():
-                    run(np.array([u_i]))
-            else:
-                run(units)
+        outside = ~_area_masks([g.horizontal.area_of_use], ulon, ulat)[0]
+    key = np.vstack([key, outside[None]])
+    if np.all(key == key[:, :1]):  # the usual case: one scene, one area
+        inverse = np.zeros(counts.shape[0], dtype=np.int64)
+    else:
+        _, inverse = np.unique(key, axis=1, return_inverse=True)
+        inverse = inverse.reshape(-1)
+    for k in range(int(inverse.max()) + 1):
+        units = np.flatnonzero(inverse == k)
+        run(units, bool(outside[units[0]]))
     return calls
 
 
