@@ -212,7 +212,7 @@ def _project_mode(args: argparse.Namespace) -> JSONObject:
 
 def _write_report(svc: Any, pid: str, output: str) -> None:
     try:
-        from gsgeo.service.reporting import write_report  # type: ignore[attr-defined]
+        from gsgeo.service.reporting import write_report
     except ImportError:
         raise InputError("the survey report is not available in this version") from None
     write_report(svc, pid, Path(output))

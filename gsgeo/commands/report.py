@@ -34,34 +34,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsgeo.export.atomic import atomic_path, check_target
-    from gsgeo.report import FORMATS, format_from_suffix, render
-
-    fmt = format_from_suffix(args.output)
-    if fmt is None:
-        known = ", ".join(s for sfx in FORMATS.values() for s in sfx)
-        suffix = Path(args.output).suffix
-        what = f"unknown report format '{suffix}'" if suffix else "no suffix to tell the format"
-        raise InputError(f"-o {args.output}: {what}; use one of {known}")
-    check_target(args.output)
-    data_dir = Path(args.data)
     from gsgeo.store import DB_NAME
 
+    data_dir = Path(args.data)
     if not (data_dir / DB_NAME).is_file():
         raise InputError(f"--data {data_dir}: no project store ({DB_NAME}) there; "
                          "gsgeo serve or gsgeo demo creates one")
     from gsgeo.service import open_projects
-    from gsgeo.service.reporting import report_data
+    from gsgeo.service.reporting import write_report
 
     t0 = time.perf_counter()
     projects = open_projects(data_dir)
     try:
-        data = report_data(projects, args.project)
+        data = write_report(projects, args.project, args.output)
     finally:
         projects.store.close()
-    body = render(data, fmt)
-    with atomic_path(args.output) as tmp:
-        tmp.write_bytes(body)
-    print(f"gsgeo report: wrote {args.output} ({fmt}, {len(body)} bytes, "
-          f"{len(data['points'])} points) in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    print(f"gsgeo report: wrote {args.output} ({len(data['points'])} points) in "
+          f"{time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return 0

@@ -15,12 +15,13 @@ from __future__ import annotations
 import math
 from collections import Counter
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gsgeo import __version__
-from gsgeo.errors import GsgeoError
+from gsgeo.errors import GsgeoError, InputError
 from gsgeo.jsontypes import JSONObject
 from gsgeo.measure.accuracy import asprs_accuracy
 from gsgeo.service.measuring import json_ready
@@ -181,3 +182,26 @@ def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
     }
     return dict(json_ready(doc))
 
+
+
+def write_report(svc: Projects, pid: str, output: str | Path, *,
+                 georeference: JSONObject | None = None) -> JSONObject:
+    """Write project ``pid``'s survey report to ``output`` (.pdf, .html or .htm; atomically:
+    a failure leaves an earlier file as it was). ``georeference`` as for :func:`report_data`.
+    Returns the report's data. InputError for an unknown suffix or a path that cannot be
+    written, NotFoundError for an unknown project; both before anything is rendered."""
+    from gsgeo.export.atomic import atomic_path, check_target
+    from gsgeo.report import FORMATS, format_from_suffix, render
+
+    fmt = format_from_suffix(output)
+    if fmt is None:
+        known = ", ".join(s for sfx in FORMATS.values() for s in sfx)
+        suffix = Path(output).suffix
+        what = f"unknown report format '{suffix}'" if suffix else "no suffix to tell the format"
+        raise InputError(f"{what}; use one of {known}", field="output")
+    check_target(output)
+    data = report_data(svc, pid, georeference=georeference)
+    body = render(data, fmt)
+    with atomic_path(output) as tmp:
+        tmp.write_bytes(body)
+    return data
