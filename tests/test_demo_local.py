@@ -179,13 +179,18 @@ def test_control_is_well_spread(truth):
     assert sv[1] > 10 and sv[2] > 2, sv       # true metres
 
 
-def _measure_control_and_apply(projects: Projects, pts: dict, rng: np.random.Generator) -> dict:
-    """Measure the six control targets (3 rays each aimed at them in the local scene, 0.3 px
-    noise at 1 mrad a pixel), fit and apply; the fit's report."""
+def _measure_control(projects: Projects, pts: dict, rng: np.random.Generator) -> None:
+    """Measure the six control targets: 3 rays each aimed at them in the local scene, 0.3 px
+    noise at 1 mrad a pixel."""
     for pid in CONTROL_IDS:
         rays = rays_at(pts[pid]["rendered_ecef"], n=3, rng=rng, noise_rad=3e-4, ifov=1e-3,
                        radius=3.0, height=4.0)      # local units: 10 m and 13 m on the ground
         projects.add_point("demo-local", {"id": pid, "rays": rays, "georef_version": 0})
+
+
+def _measure_control_and_apply(projects: Projects, pts: dict, rng: np.random.Generator) -> dict:
+    """Measure the six control targets, fit and apply; the fit's report."""
+    _measure_control(projects, pts, rng)
     return projects.georeference("demo-local", apply=True)
 
 
@@ -227,6 +232,25 @@ def test_georeference_by_measured_control_recovers_the_true_similarity(data, tru
         store.close()
     assert acc["counts"]["matched"] == 4
     assert acc["statistics"]["RMSE_3D"] < 0.05
+
+
+def test_the_readme_command_georeferences_it(data, truth, tmp_path):
+    """`gsgeo georef --project demo-local --data DIR --apply` (the README's command, --json
+    to read it) fits the measured control and applies it to the scene."""
+    d = tmp_path / "data"
+    shutil.copytree(data, d)
+    store = open_store(d)
+    try:
+        _measure_control(Projects(store, d), {p["id"]: p for p in truth["points"]},
+                         np.random.default_rng(3))
+    finally:
+        store.close()
+    r = _gsgeo("georef", "--project", "demo-local", "--data", str(d), "--apply", "--json")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert abs(rep["scale"] / truth["true_similarity"]["scale"] - 1) < 1e-3
+    assert sorted(c["id"] for c in rep["control"]) == sorted(CONTROL_IDS)
+    assert read_scene_georef(d / "scenes" / "demo-local").georeferenced is True
 
 
 def test_rebuild_after_a_georeference_keeps_points_on_their_features(data, truth, tmp_path):
