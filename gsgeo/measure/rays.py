@@ -79,7 +79,7 @@ class Rays:
         vp = _optional_rows(self.viewports, n, 2)
         mm = None if self.model_matrices is None else \
             np.asarray(self.model_matrices, dtype=np.float64).reshape(n, 4, 4)
-        for i in range(n):
+        for i in ([] if self._plainly_valid(o, d, f, px, vp, mm) else range(n)):
             at = f"rays[{i}]"
             problem = limits.origin_problem(o[i]) if np.all(np.isfinite(o[i])) else \
                 "expected a finite number"
@@ -109,6 +109,24 @@ class Rays:
             if value is not None:
                 value.setflags(write=False)
             object.__setattr__(self, name, value)
+
+    @staticmethod
+    def _plainly_valid(o: np.ndarray, d: np.ndarray, f: np.ndarray | None,
+                       px: np.ndarray | None, vp: np.ndarray | None,
+                       mm: np.ndarray | None) -> bool:
+        """Every ray within gsgeo.limits, checked on whole arrays (the common case); False
+        sends the caller through the per-ray checks that name the first problem."""
+        if mm is not None or not (np.isfinite(o).all() and np.isfinite(d).all()):
+            return False
+        ro, rd = np.hypot.reduce(o, axis=1), np.hypot.reduce(d, axis=1)
+        if not (np.all(ro <= limits.MAX_ORIGIN_M) and np.all(rd >= limits.DIRECTION_MIN)
+                and np.all(rd <= limits.DIRECTION_MAX)):
+            return False
+        if f is not None:
+            g = f[~np.isnan(f)]
+            if not np.all((g >= limits.IFOV_MIN) & (g <= limits.IFOV_MAX)):
+                return False
+        return not any(a is not None and np.isinf(a).any() for a in (px, vp))
 
     @classmethod
     def from_columns(cls, origins: Sequence[ArrayLike], directions: Sequence[ArrayLike],

@@ -12,31 +12,82 @@ import math
 from pathlib import Path
 from typing import Any
 
+import orjson
+
 from gsgeo.errors import CRSError, InputError
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, Rays, SolveSettings, measure_point
 from gsgeo.measure.framecov import FrameCovariance
+from gsgeo.measure.rays import RAY_KEYS
 from gsgeo.measure.schema import record_of
 from gsgeo.session import parse_rays
 
 
 def json_ready(value: Any) -> JSON:
-    """``value`` with every non-finite float replaced by None (JSON has no NaN)."""
+    """``value`` with every non-finite float replaced by None (JSON has no NaN) and numpy
+    values as plain numbers and lists. One orjson round trip (fast: a point's result holds
+    hundreds of numbers); values orjson cannot take go through :func:`plain_json`."""
+    try:
+        return orjson.loads(orjson.dumps(value, option=orjson.OPT_SERIALIZE_NUMPY
+                                         | orjson.OPT_NON_STR_KEYS))
+    except (orjson.JSONEncodeError, TypeError):
+        return plain_json(value)
+
+
+def plain_json(value: Any) -> JSON:
+    """The slow, general :func:`json_ready`: recursion over dicts, lists and ``tolist()``."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: json_ready(v) for k, v in value.items()}
+        return {k: plain_json(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [json_ready(v) for v in value]
+        return [plain_json(v) for v in value]
     if hasattr(value, "tolist"):  # numpy scalars and arrays
-        return json_ready(value.tolist())
+        return plain_json(value.tolist())
     return value
 
 
 def stored_rays(rays: list[JSONObject]) -> Rays:
     """The typed rays of a point's session-JSON rays as stored (or given); errors name
-    ``rays[i].<member>``."""
+    ``rays[i].<member>``.
+
+    Plain ray objects (numbers where numbers belong) go straight into arrays, checked once by
+    Rays; anything else takes the session reader, whose messages name the JSON problem.
+    """
+    try:
+        if all(isinstance(r, dict) and r.keys() <= _RAY_KEYS for r in rays):
+            return Rays.from_columns(
+                [_numbers(r["origin"], 3) for r in rays],
+                [_numbers(r["direction"], 3) for r in rays],
+                [_number(r.get("ifov")) for r in rays],
+                [_maybe_numbers(r.get("pixel"), 2) for r in rays],
+                [_maybe_numbers(r.get("viewport"), 2) for r in rays],
+                [_maybe_numbers(r.get("model_matrix"), 16) for r in rays])
+    except (KeyError, TypeError, ValueError, OverflowError):
+        pass
     return parse_rays(rays)[1]
+
+
+_RAY_KEYS = frozenset(RAY_KEYS)
+
+
+def _number(v: JSON) -> float | None:
+    if v is None:
+        return None
+    if type(v) is not float and type(v) is not int:
+        raise TypeError("not a number")
+    return v
+
+
+def _numbers(v: JSON, n: int) -> list[float]:
+    if not isinstance(v, list) or len(v) != n or not all(
+            type(x) is float or type(x) is int for x in v):
+        raise TypeError("not a vector")
+    return [float(x) for x in v if type(x) is float or type(x) is int]
+
+
+def _maybe_numbers(v: JSON, n: int) -> list[float] | None:
+    return None if v is None else _numbers(v, n)
 
 
 def check_excluded(excluded: list[int], n_rays: int, field: str = "excluded") -> list[int]:

@@ -16,6 +16,8 @@ from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
+import orjson
+
 from gsgeo.errors import GsgeoError
 from gsgeo.jsontypes import JSON
 from gsgeo.store.base import Store, Transaction
@@ -42,11 +44,17 @@ def now_iso() -> str:
 
 
 def _dumps(value: JSON) -> str:
-    return json.dumps(value, separators=(",", ":"), allow_nan=False)
+    """Compact JSON text (orjson: a point's result is written and read on every re-measure).
+    Values arrive JSON-ready (gsgeo.service.measuring.json_ready: no NaN); integers beyond
+    64 bits, which orjson refuses, go through the standard library."""
+    try:
+        return orjson.dumps(value).decode()
+    except orjson.JSONEncodeError:  # e.g. integers beyond 64 bits: the standard library's
+        return json.dumps(value, separators=(",", ":"), allow_nan=False)
 
 
 def _loads(text: str | None) -> JSON:
-    return None if text is None else json.loads(text)
+    return None if text is None else orjson.loads(text)
 
 
 class SQLiteTransaction(Transaction):
@@ -114,7 +122,7 @@ class SQLiteTransaction(Transaction):
     def _point(row: sqlite3.Row) -> PointRecord:
         return PointRecord(project_id=row["project_id"], id=row["id"], seq=row["seq"],
                            code=row["code"], description=row["description"],
-                           rays=json.loads(row["rays"]), excluded=json.loads(row["excluded"]),
+                           rays=orjson.loads(row["rays"]), excluded=orjson.loads(row["excluded"]),
                            result=_loads(row["result"]),
                            error=row["error"], solved_rev=row["solved_rev"],
                            created_at=row["created_at"], updated_at=row["updated_at"],
