@@ -27,7 +27,7 @@ from gsgeo.report.content import fmt_mm
 from gsgeo.server.app import ServerConfig, create_app
 from gsgeo.service import open_projects
 from gsgeo.service.checkpoints import CheckPointRow
-from gsgeo.service.reporting import report_data
+from gsgeo.service.reporting import frame_precision, report_data
 
 CRS = "EPSG:32630"
 TO_UTM = pyproj.Transformer.from_crs("EPSG:4979", CRS, always_xy=True)
@@ -178,10 +178,31 @@ def test_an_elongated_horizontal_error_is_remarked():
     assert "only indicative" in remarks
 
 
+def test_frame_precision_reads_the_covariance_in_east_north_up():
+    """A frame covariance stated in ECEF comes back as the east/north/up sigmas it was made of."""
+    lon, lat, h = 10.0, 50.0, 200.0
+    centre = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True).transform(
+        lon, lat, h)
+    lam, phi = np.radians(lon), np.radians(lat)
+    r = np.array([[-np.sin(lam), np.cos(lam), 0.0],
+                  [-np.sin(phi) * np.cos(lam), -np.sin(phi) * np.sin(lam), np.cos(phi)],
+                  [np.cos(phi) * np.cos(lam), np.cos(phi) * np.sin(lam), np.sin(phi)]])
+    c = np.zeros((7, 7))
+    c[:3, :3] = r.T @ np.diag([0.01, 0.02, 0.03]) ** 2 @ r
+    c[3:6, 3:6] = r.T @ np.diag(np.radians([1.0, 2.0, 3.0]) / 3600) ** 2 @ r
+    c[6, 6] = 5e-6**2
+    got = frame_precision({"centre_ecef": list(centre), "covariance": c.tolist()})
+    assert got["shift_enu_m"] == pytest.approx([0.01, 0.02, 0.03], rel=1e-9)
+    assert got["rotation_enu_arcsec"] == pytest.approx([1.0, 2.0, 3.0], rel=1e-9)
+    assert got["scale_ppm"] == pytest.approx(5.0)
+    assert (got["centre"]["lon"], got["centre"]["lat"]) == pytest.approx((lon, lat))
+    assert frame_precision(None) is None and frame_precision({"covariance": [[1]]}) is None
+
+
 # the documents ----------------------------------------------------------------------------------
 def decoded_images(html: str) -> list[bytes]:
     return [base64.b64decode(m) for m in
-            re.findall(r'src="data:image/svg\+xml;base64,([A-Za-z0-9+/=]+)"', html)]
+            re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', html)]
 
 
 def test_html_is_self_contained_with_tables_figures_and_escaped_text(svc, monkeypatch):
@@ -190,9 +211,10 @@ def test_html_is_self_contained_with_tables_figures_and_escaped_text(svc, monkey
     html = render(data, "html").decode("utf-8")
     images = decoded_images(html)
     # control residual plan, check residual plan, dH bars, points plan
-    assert len(images) == 4 and all(b"<svg" in img for img in images)
+    assert len(images) == 4 and all(img.startswith(b"\x89PNG\r\n\x1a\n") for img in images)
     assert html.count("<table") >= 10
     for needed in ("Control residuals", "Measured points (8)", "RMSE_3D", "OUTLIER",
+                   "at the control centroid",
                    "1.7308", "1.96", "GCP4", "Sign-off", "EPSG:32630"):
         assert needed in html, needed
     assert re.search(r'<tr class="outlier"><td>GCP4</td>', html)

@@ -2,7 +2,7 @@
 
 gsgeo.service.reporting gathers the data (plain JSON); this package renders it:
 ``content`` (data -> sections of facts, tables, figures and notes), ``plots`` (matplotlib
-figures as SVG data URIs), ``html`` (jinja2) and ``pdf`` (WeasyPrint from that HTML). It
+figures as PNG data URIs), ``html`` (jinja2) and ``pdf`` (WeasyPrint from that HTML). It
 sits beside gsgeo.export, below the service: it never opens a store.
 """
 

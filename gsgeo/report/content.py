@@ -74,7 +74,7 @@ class Table:
 
 @dataclass
 class Figure:
-    """A figure as a data URI (SVG), with its caption."""
+    """A figure as a data URI (PNG), with its caption."""
 
     src: str
     caption: str
@@ -181,9 +181,7 @@ def _control_style(c: JSONObject) -> str:
     return "control"
 
 
-def _rmse_rows(label: str, r: JSON) -> list[str]:
-    if not r:
-        return [label, "0", DASH, DASH, DASH, DASH, DASH]
+def _rmse_rows(label: str, r: JSONObject) -> list[str]:
     return [label, fmt_text(r.get("count")), fmt_mm(r.get("e")), fmt_mm(r.get("n")),
             fmt_mm(r.get("horizontal")), fmt_mm(r.get("h")), fmt_mm(r.get("3d"))]
 
@@ -196,7 +194,45 @@ def _rotation_angle(rot: JSON) -> str:
     return f"{math.degrees(math.acos(max(-1.0, min(1.0, (tr - 1) / 2)))):.6f}°"
 
 
-def _georef_blocks(status: JSONObject) -> list[Block]:
+def _parameters(g: JSONObject) -> Table:
+    """The similarity's parameters (translation and rotation as fitted, old ECEF -> new)."""
+    t = g.get("translation") or [None] * 3
+    scale, s_sigma = _num(g.get("scale")), _num(g.get("scale_sigma"))
+    rel = DASH if scale is None or s_sigma is None or scale == 0 else \
+        f"{s_sigma / abs(scale) * 1e6:.1f} ppm"
+    rows = [["scale s", fmt_g(scale, 10), fmt_g(s_sigma, 3), rel]]
+    if scale is not None and abs(scale - 1) < 0.01:
+        rows.append(["scale change s − 1", f"{(scale - 1) * 1e6:+.1f} ppm", DASH, ""])
+    rows += [[f"translation {a} (ECEF) [m]", fmt_m(t[i], 4), DASH, ""] for i, a in enumerate("XYZ")]
+    rows.append(["rotation angle", _rotation_angle(g.get("rotation")), DASH, ""])
+    rot = g.get("rotation") or []
+    for i, r in enumerate(rot):
+        rows.append([f"rotation matrix row {i + 1}", " ".join(f"{float(x):+.9f}" for x in r),
+                     DASH, ""])
+    return _table([("Parameter", False), ("Value", True), ("σ", True), ("σ relative", True)],
+                  rows, caption="Similarity y = s·R·x + t from the scene's previous frame to "
+                                "the new one (ECEF).")
+
+
+def _precision(p: JSONObject, g: JSONObject) -> Table:
+    """The fit's precision at the control centroid (the frame covariance)."""
+    sh = p.get("shift_enu_m") or [None] * 3
+    rot = p.get("rotation_enu_arcsec") or [None] * 3
+    c = p.get("centre") or {}
+    ts = ", ".join(fmt_g(v, 3) for v in (g.get("translation_sigma") or []))
+    rows = [[f"shift {a}", fmt_mm(sh[i]) + " mm"] for i, a in enumerate(("east", "north", "up"))]
+    rows += [[f"rotation about {a}", DASH if _num(rot[i]) is None else f"{float(rot[i]):.2f}″"]
+             for i, a in enumerate(("east", "north", "up"))]
+    rows.append(["scale", f"{fmt_g(p.get('scale_ppm'), 3)} ppm"])
+    return _table([("1σ of the georeference", False), ("at the control centroid", True)], rows,
+                  caption=f"The fit's uncertainty about the control centroid (lat "
+                          f"{fmt_g(c.get('lat'), 9)}°, lon {fmt_g(c.get('lon'), 9)}°), which "
+                          "adds to every measured point's total sigma. The translation's own "
+                          f"sigmas about the Earth's centre ({ts} m) are large only because "
+                          "the translation is correlated with the rotation there.")
+
+
+def _georef_blocks(status: JSONObject, precision: JSONObject | None) -> list[Block]:
     blocks: list[Block] = []
     rows = [("Scene", fmt_text(status.get("scene"))),
             ("Georeference version", fmt_text(status.get("version"))),
@@ -216,24 +252,9 @@ def _georef_blocks(status: JSONObject) -> list[Block]:
              ("Degrees of freedom", fmt_text(g.get("dof"))),
              ("Global test p-value", fmt_g(g.get("global_test_p"), 3))]
     blocks.append(Facts(rows))
-    t = g.get("translation") or [None] * 3
-    ts = g.get("translation_sigma") or [None] * 3
-    rs = g.get("rotation_sigma_deg") or [None] * 3
-    params = [["scale", fmt_g(g.get("scale"), 10), fmt_g(g.get("scale_sigma"), 3),
-               f"{fmt_g(g.get('scale_ppm'), 4)} ppm"]]
-    params += [[f"translation {a} (ECEF)", fmt_m(t[i], 4), fmt_mm(ts[i]) + " mm", "m"]
-               for i, a in enumerate("XYZ")]
-    params += [[f"rotation about ECEF {a}", DASH,
-                DASH if _num(rs[i]) is None else f"{float(rs[i]) * 3600:.3f}″", "small angle"]
-               for i, a in enumerate("XYZ")]
-    params.append(["rotation angle (total)", _rotation_angle(g.get("rotation")), DASH, ""])
-    blocks.append(_table([("Parameter", False), ("Value", True), ("σ", True), ("", False)],
-                         params, caption="Similarity y = s·R·x + t, old ECEF -> new ECEF."))
-    rot = g.get("rotation")
-    if rot:
-        blocks.append(_table([("R", False), ("", True), ("", True), ("", True)],
-                             [[f"row {i + 1}", *(f"{float(x):.9f}" for x in r)]
-                              for i, r in enumerate(rot)], caption="Rotation matrix"))
+    blocks.append(_parameters(g))
+    if precision:
+        blocks.append(_precision(precision, g))
     control = g.get("control") or []
     if control:
         cols = [("Control", False), ("Status", False), ("dE [mm]", True), ("dN [mm]", True),
@@ -273,8 +294,8 @@ def _georef_blocks(status: JSONObject) -> list[Block]:
     blocks.append(_table(
         [("RMSE", False), ("n", True), ("E [mm]", True), ("N [mm]", True),
          ("horizontal [mm]", True), ("H [mm]", True), ("3-D [mm]", True)],
-        [_rmse_rows("control", g.get("rmse_control")),
-         _rmse_rows("check", g.get("rmse_check"))]))
+        [_rmse_rows(label, g.get(key)) for label, key in
+         (("control", "rmse_control"), ("check", "rmse_check")) if g.get(key)]))
     if g.get("outliers"):
         blocks.append(Notes([f"Outlier{'s' if len(g['outliers']) > 1 else ''} flagged by "
                              f"data snooping: {', '.join(map(str, g['outliers']))}."],
@@ -313,7 +334,8 @@ def _georef_section(data: JSONObject) -> Section:
     if not status:
         return Section("Georeference", "georeference",
                        [Notes([str(geo.get("note") or "no georeference information")])])
-    return Section("Georeference", "georeference", _georef_blocks(status))
+    return Section("Georeference", "georeference",
+                   _georef_blocks(status, geo.get("frame_precision")))
 
 
 def _accuracy_section(data: JSONObject) -> Section:

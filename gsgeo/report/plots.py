@@ -1,9 +1,9 @@
-"""The survey report's figures, drawn with matplotlib and returned as SVG data URIs.
+"""The survey report's figures, drawn with matplotlib and returned as PNG data URIs.
 
 Figures are built with matplotlib's object API (``Figure`` on the non-interactive Agg
 canvas, never pyplot), so nothing touches a display or global figure state and a server can
-draw reports from several threads. SVG text is drawn as paths and the ids are salted with a
-constant, so a figure is self-contained and the same data give the same bytes.
+draw reports from several threads. PNG at 200 dpi is sharp on paper and quick to lay out
+(WeasyPrint draws an SVG figure's glyph paths one by one: several seconds a report).
 
 Plans are in grid easting/northing (the CRS's units); residual vectors are drawn
 exaggerated, with a reference arrow stating the scale.
@@ -27,8 +27,9 @@ if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType
 
 # Grid coordinates are shown whole (no "+5.71e6" offset a reader must add back).
+DPI = 200
 RC: dict[RcKeyType, Any] = {
-    "svg.fonttype": "path", "svg.hashsalt": "gsgeo-report", "font.size": 8.0,
+    "font.size": 8.0,
     "axes.formatter.useoffset": False, "axes.formatter.limits": (-9, 12),
     "axes.titlesize": 9.0, "axes.labelsize": 8.0, "legend.fontsize": 7.0}
 #: Colours: used control, flagged outlier, excluded, check point, measured point.
@@ -52,8 +53,8 @@ class Vector:
 
 def _uri(fig: Figure) -> str:
     buf = io.BytesIO()
-    fig.savefig(buf, format="svg", metadata={"Date": None}, bbox_inches="tight")
-    return "data:image/svg+xml;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
 def _figure(width_in: float, height_in: float) -> Figure:
@@ -70,7 +71,7 @@ def _nice(x: float) -> float:
 
 
 def residual_plan(vectors: Sequence[Vector], title: str) -> str | None:
-    """Horizontal residual vectors on a plan (SVG data URI), None when nothing is plotted.
+    """Horizontal residual vectors on a plan (PNG data URI), None when nothing is plotted.
 
     Arrows are exaggerated so the longest is about a tenth of the plan's extent; a
     reference arrow states the scale in millimetres. Each point is labelled with its id
@@ -128,7 +129,7 @@ def residual_plan(vectors: Sequence[Vector], title: str) -> str | None:
 
 def height_residuals(ids: Sequence[str], dh: Sequence[float], styles: Sequence[str],
                      title: str) -> str | None:
-    """dH per point as bars in millimetres (SVG data URI); None without any height."""
+    """dH per point as bars in millimetres (PNG data URI); None without any height."""
     vals = np.array([math.nan if x is None else float(x) for x in dh], dtype=float)
     ok = np.isfinite(vals)
     if not ok.any():

@@ -95,7 +95,36 @@ def _georeference(svc: Projects, pid: str, fit: JSONObject | None) -> JSONObject
         note = None
     elif status is not None:
         status["current_applied"] = True
-    return {"status": status, "note": note}
+    current = (status or {}).get("current") or {}
+    return {"status": status, "note": note,
+            "frame_precision": frame_precision(current.get("frame_covariance"))}
+
+
+def frame_precision(frame: JSONObject | None) -> JSONObject | None:
+    """A fit's frame covariance (about the control centroid, parameters dt 3 m, dw 3 rad,
+    ds 1; ECEF axes) as a surveyor reads it: 1-sigma shift in east, north, up (m), rotation
+    about east, north, up (arcseconds), scale (ppm), and where the centroid is (lon, lat in
+    degrees, ellipsoidal h in m). None without a usable covariance."""
+    from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form, enu_rotation
+
+    try:
+        c = np.asarray(frame["covariance"], dtype=float) if frame else None
+        centre = np.asarray(frame["centre_ecef"], dtype=float) if frame else None
+    except (KeyError, TypeError, ValueError):
+        return None
+    if c is None or centre is None or c.shape != (7, 7) or centre.shape != (3,) \
+            or not np.all(np.isfinite(c)) or not np.all(np.isfinite(centre)):
+        return None
+    lon, lat, h = (float(v) for v in np.ravel(ecef_to_geodetic_closed_form(centre[None, :])))
+    r = enu_rotation(lon, lat).reshape(3, 3)
+
+    def sig(block: np.ndarray) -> list[float]:
+        return np.sqrt(np.clip(np.diag(r @ block @ r.T), 0.0, None)).tolist()
+
+    return {"shift_enu_m": sig(c[:3, :3]),
+            "rotation_enu_arcsec": [math.degrees(v) * 3600 for v in sig(c[3:6, 3:6])],
+            "scale_ppm": math.sqrt(max(float(c[6, 6]), 0.0)) * 1e6,
+            "centre": {"lon": lon, "lat": lat, "h": h}}
 
 
 def _check_sigmas(cps: list[CheckPointRecord], ids: list[str]) -> tuple[np.ndarray, np.ndarray]:
