@@ -15,7 +15,7 @@ import pyproj
 import pytest
 import rasterio
 from affine import Affine
-from crs_helpers import camera_origins, noisy_directions
+from crs_helpers import camera_origins, model_matrix, noisy_directions
 
 import gsgeo.measure.batch as batch
 from gsgeo.crs.frames import EnuFrame, geodetic_to_ecef
@@ -227,14 +227,55 @@ def test_excluded_rays_equal_measure_point(fallbacks):
         assert not (g.outliers is not None and (g.outliers & g.excluded).any())
 
 
-def test_model_matrices_partial_ifov_and_refused_exclusions_go_through_measure_point(fallbacks):
+def rendered(point, matrices):
+    """The point as the viewer reports it under per-ray model matrices (None: identity)."""
+    pid, code, desc, rays, exclude = point
+    o, d = rays.origins.copy(), rays.directions.copy()
+    for i, mm in enumerate(matrices):
+        if mm is not None:
+            o[i] = mm[:3, :3] @ o[i] + mm[:3, 3]
+            d[i] = mm[:3, :3] @ d[i]
+    stack = np.array([np.full((4, 4), np.nan) if mm is None else mm for mm in matrices])
+    return (pid, code, desc, Rays(o, d, rays.ifov, model_matrices=stack), exclude)
+
+
+def test_model_matrices_equal_measure_point(fallbacks):
+    rng = np.random.default_rng(12)
+    points = make_points(rng, 24, rays=(3, 6))
+    centre = geodetic_to_ecef(-1.5, 52.5, 50.0)
+    similarity = model_matrix(centre)  # rotation, uniform scale and shift
+    shear = similarity.copy()
+    shear[0, 1] += 1e-3  # not a similarity: measure_point warns
+    shift = np.eye(4)
+    shift[:3, 3] = (2.0, -1.0, 0.5)
+    for k, point in enumerate(points):
+        n = len(point[3])
+        choice = [similarity, shift, np.eye(4), None][k % 4]
+        matrices = [choice] * n
+        if k % 3 == 0:
+            matrices[0] = shift if choice is not shift else None  # rays under two matrices
+        if k % 8 == 5:
+            matrices[-1] = shear
+        points[k] = rendered(point, matrices)
+    settings = SolveSettings(crs="EPSG:27700")
+    got = measure_batch(points, settings)
+    assert fallbacks == []
+    for g, r in zip(got, reference(points, settings), strict=True):
+        assert_same(g, r)
+    assert sum(isinstance(g, Measurement) and any("not a rotation with uniform scale" in w
+                                                  for w in g.warnings) for g in got) == 3
+    g = got[0]
+    assert isinstance(g, Measurement)  # mapped back to where the rays were aimed from
+    assert np.linalg.norm(g.ray_origins_ecef - rays_of(points[0]).origins, axis=1).max() > 1.0
+
+
+def test_partial_ifov_singular_matrices_and_refused_exclusions_go_through_measure_point(
+        fallbacks):
     rng = np.random.default_rng(5)
     points = make_points(rng, 12, rays=(4, 6))
-    pid, code, desc, rays, _ = points[1]
-    m = np.eye(4)
-    m[:3, 3] = (2.0, -1.0, 0.5)  # a viewer modelMatrix (a shift)
-    points[1] = (pid, code, desc, Rays(rays.origins + m[:3, 3], rays.directions, rays.ifov,
-                                       model_matrices=np.repeat(m[None], len(rays), axis=0)), ())
+    flat = np.eye(4)
+    flat[2, 2] = 0.0  # affine but singular: measure_point's error
+    points[1] = rendered(points[1], [flat] + [None] * (len(points[1][3]) - 1))
     pid, code, desc, rays, _ = points[2]
     f = np.full(len(rays), IFOV)
     f[1] = np.nan
@@ -248,8 +289,7 @@ def test_model_matrices_partial_ifov_and_refused_exclusions_go_through_measure_p
     assert sorted(fallbacks) == ["P1", "P2", "P3", "P4", "P5"]
     for g, r in zip(got, reference(points, settings), strict=True):
         assert_same(g, r)
-    assert isinstance(got[1], Measurement)
-    np.testing.assert_allclose(got[1].ray_origins_ecef, rays_of(points[1]).origins - m[:3, 3])
+    assert isinstance(got[1], MeasurementFailure) and "singular" in got[1].error
     assert isinstance(got[2], MeasurementFailure) and "no ifov on ray(s) 1" in got[2].error
     assert isinstance(got[3], MeasurementFailure) and "leaves fewer than 2" in got[3].error
     assert isinstance(got[4], MeasurementFailure) and "cannot exclude ray index" in got[4].error

@@ -4,21 +4,30 @@ Re-solving every stored point after a georeference change must take well under a
 10 000 points, while the per-point pipeline costs about a millisecond a point (a few dozen
 small numpy and PROJ calls each). :func:`measure_batch` runs the same pipeline on arrays:
 
-- points are grouped by ray count and model (angular or unweighted); within a group the
-  provisional points, the per-point ENU frames (the closed-form rotation of
-  :func:`gsgeo.crs.ellipsoid.enu_rotation` at the origin's PROJ latitude and longitude: what
-  ``+proj=topocentric`` evaluates), the intersection (:func:`gsgeo.solve.core.solve_core`), the
-  global test and the data snooping of :mod:`gsgeo.solve.outliers` run over all points at once;
+- points are grouped by ray count, rays kept (after exclusions) and model (angular or
+  unweighted); within a group the provisional points, the per-point ENU frames (the
+  closed-form rotation of :func:`gsgeo.crs.ellipsoid.enu_rotation` at the origin's PROJ
+  latitude and longitude: what ``+proj=topocentric`` evaluates), the intersection
+  (:func:`gsgeo.solve.core.solve_core`), the global test and the data snooping of
+  :mod:`gsgeo.solve.outliers` (:func:`snoop_many`) run over all points at once, and the
+  solution's warnings are worded as :func:`gsgeo.solve.intersect` words them;
 - the grid coordinates of all points, and of all camera centres, come from a few
   :func:`gsgeo.crs.grid.to_grid_many` calls. A call chooses its operations at the centroid of
-  its points, so points are grouped by which operations' areas of use contain them (a call is
-  split when its centroid would decide differently); a point outside the grid CRS's area of
-  use, or a call that fails, is transformed on its own, exactly as the single-point path does.
+  its points, so points are grouped by which operations' areas of use contain them, and a
+  call whose centroid would decide otherwise is split into one call per point. Points outside
+  the grid CRS's area of use share a call but take their warnings from a one-point call (the
+  warning counts a call's points); a call that fails is halved until the failing points stand
+  alone, each with the error its own call raises.
 
-Anything the fast path does not cover (excluded rays, a modelMatrix, ifov on some rays only,
-fewer than 2 rays, parallel rays, a point behind a camera, an unusable ENU origin) goes
-through ``measure_point`` itself, so errors and their messages are the same. The one field
-that may differ is ``solution.iterations`` (the batch solver reports its group's count).
+Rays under a viewer modelMatrix are georeferenced by each distinct matrix's inverse (as
+:func:`gsgeo.crs.modelmatrix.rendered_to_georeferenced` does). Anything the fast path does not
+cover (a singular modelMatrix, ifov on some rays only, fewer than 2 rays or an exclusion
+measure_point refuses, parallel rays, a point behind a camera, an unusable ENU origin) goes
+through ``measure_point`` itself, so errors and their messages are
+the same. What may differ: floats by rounding (coordinates ~1e-9 m; grid covariances by the
+~1e-7 relative that their forward-difference Jacobian already moves when a point moves by one
+ulp), ``solution.iterations`` (the batch solver reports its group's count) and
+``measured_at`` (one time for the batch).
 """
 
 from __future__ import annotations
@@ -34,10 +43,17 @@ from gsgeo.crs.confidence import ellipse_95, ellipsoid_axes_95
 from gsgeo.crs.ellipsoid import enu_rotation
 from gsgeo.crs.frames import ecef_to_geodetic
 from gsgeo.crs.grid import GridPoint, GridPoints, to_grid_many
+from gsgeo.crs.modelmatrix import (
+    IDENTITY,
+    apply_directions,
+    apply_points,
+    invert_affine,
+    is_similarity,
+)
 from gsgeo.crs.resolve import SourceCRS, grid_crs
 from gsgeo.crs.resolve import source_crs as resolve_source
 from gsgeo.crs.transformers import candidates, transformer
-from gsgeo.errors import CRSError, GsgeoError
+from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.measure.point import measure_point, measure_points
 from gsgeo.measure.rays import Rays, SolveSettings
 from gsgeo.measure.schema import Measurement, MeasurementFailure, now_utc
@@ -55,10 +71,13 @@ from gsgeo.solve.stats import chi2_2_quantile, chi2_sf, f2_quantile
 
 #: One point to measure: id, code, description, its rays, 0-based indices of excluded rays.
 BatchPoint = tuple[str, str, str, Rays, Sequence[int]]
+#: measure_point's warning for a modelMatrix that is not a similarity.
+DISTORTING_MATRIX = ("a model_matrix is not a rotation with uniform scale: angles between rays "
+                     "are distorted, so the angular model (ifov) is only approximate")
 #: Condition number of the provisional normal matrix above which its mean origin is used.
 PROVISIONAL_MAX_CONDITION = 1e12
 
-__all__ = ["BatchPoint", "measure_batch"]
+__all__ = ["BatchPoint", "measure_batch", "snoop_many"]
 
 
 def measure_batch(points: Sequence[BatchPoint],
@@ -80,8 +99,7 @@ def measure_batch(points: Sequence[BatchPoint],
     for i, (_, _, _, rays, exclude) in enumerate(points):
         n = len(rays)
         keep = _keep_mask(exclude, n) if len(exclude) else None
-        if (s_px is None or rays.model_matrices is not None or n < 2
-                or (len(exclude) and keep is None)):
+        if s_px is None or n < 2 or (len(exclude) and keep is None):
             slow.append(i)
             continue
         if keep is not None:
@@ -166,6 +184,7 @@ class _Solved:
     counts: np.ndarray  # (M,) rays of each point
     rays: dict[str, list[np.ndarray]]  # origins, directions, ranges, residuals, flags, ...
     optional: dict[str, list[FloatArray | None]]  # pixel residuals (angular model only)
+    before: list[list[str]]  # the measurement's own (a distorting modelMatrix), first
     warnings: list[list[str]]  # the solution's
     notes: list[list[str]]  # the measurement's own (exclusions), after the solution's
     model: list[str]
@@ -186,7 +205,8 @@ class _Solved:
             cat("camera_rows"), cat("counts"),
             {k: [a for p in parts for a in p.rays[k]] for k in parts[0].rays},
             {k: [a for p in parts for a in p.optional[k]] for k in parts[0].optional},
-            [w for p in parts for w in p.warnings], [w for p in parts for w in p.notes],
+            [w for p in parts for w in p.before], [w for p in parts for w in p.warnings],
+            [w for p in parts for w in p.notes],
             [x for p in parts for x in p.model],
             [x for p in parts for x in p.iterations])
 
@@ -233,10 +253,14 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
     f = None
     if angular:
         f = np.concatenate([points[i][3].ifov for i in members]).reshape(m, n)
-    d = d_r / np.linalg.norm(d_r, axis=2, keepdims=True)  # georeferenced: no modelMatrix
+    matrices = [points[i][3].model_matrices for i in members]
+    o, d, similar, ok = _georeferenced(o, d_r, None if all(x is None for x in matrices) else
+                                       np.concatenate([np.full((n, 4, 4), np.nan) if x is None
+                                                       else x for x in matrices]).reshape(
+                                                           m, n, 4, 4))
     src = resolve_source(settings.source_crs or "EPSG:4978")
     origin = _provisional(_kept(o, keep, n_keep), _kept(d, keep, n_keep))
-    ok = np.all(np.isfinite(origin), axis=1) & (np.linalg.norm(origin, axis=1) >= 1e5)
+    ok &= np.all(np.isfinite(origin), axis=1) & (np.linalg.norm(origin, axis=1) >= 1e5)
     if f is not None:  # NaN (ifov on some rays only) fails this too
         ok &= np.all((f >= limits.IFOV_MIN) & (f <= limits.IFOV_MAX), axis=1)
     origin = np.where(ok[:, None], origin, o[:, 0])  # the rows not ok go to measure_point
@@ -266,8 +290,8 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
                            None if sol.weights is None else sol.weights[front],
                            None if sol.sigma_m is None else sol.sigma_m[front],
                            sol.vtpv[front], sol.iterations)
-    idx, keep, o, d, o_enu, du, origin, rot = (
-        a[rows] for a in (idx, keep, o, d, o_enu, du, origin, rot))
+    idx, keep, o, d, o_enu, du, origin, rot, similar = (
+        a[rows] for a in (idx, keep, o, d, o_enu, du, origin, rot, similar))
     max_angle, max_isect = max_angle[rows], max_isect[rows]
     f = None if f is None else f[rows]
     m = rows.size
@@ -308,6 +332,7 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
         warnings[k].append(  # ray numbers among the kept rays, as intersect sees them
             f"ray(s) {_ray_list(flags[k])} look like outliers (data snooping at 0.1 %); "
             "check the aim or exclude them")
+    before: list[list[str]] = [[] if ok_k else [DISTORTING_MATRIX] for ok_k in similar.tolist()]
     notes: list[list[str]] = [[] for _ in range(m)]  # the Measurement's, after the solution's
     for k in np.flatnonzero(~keep.all(axis=1)).tolist():
         notes[k].append(f"ray(s) {_ray_list(np.logical_not(keep[k]))} excluded by request")
@@ -330,7 +355,57 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
     rms = np.sqrt(np.mean(sol.residuals_m**2, axis=1))
     return _Group(_Solved(idx, origin, rot, sol.points, cov, sigma0, max_angle, condition, rms,
                           np.full(m, dof), o.reshape(-1, 3), np.full(m, n), rays, optional,
-                          warnings, notes, [model] * m, [sol.iterations] * m), fallback)
+                          before, warnings, notes, [model] * m, [sol.iterations] * m), fallback)
+
+
+def _georeferenced(o: FloatArray, d: FloatArray, matrices: FloatArray | None
+                   ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray]:
+    """:func:`gsgeo.crs.modelmatrix.rendered_to_georeferenced` for M points of N rays.
+
+    o, d (M, N, 3) rendered ECEF; matrices (M, N, 4, 4), NaN where a ray has none, or None.
+    Returns georeferenced origins and unit directions, whether each point's matrices are all
+    similarities, and whether the point is fit for the fast path (its matrices invertible,
+    its origins and directions usable afterwards; otherwise measure_point reports it).
+    Each distinct matrix is inverted once.
+    """
+    m = o.shape[0]
+    go = o.copy()
+    gd = d / np.linalg.norm(d, axis=2, keepdims=True)
+    similar = np.ones(m, dtype=bool)
+    ok = np.ones(m, dtype=bool)
+    if matrices is None:
+        return go, gd, similar, ok
+    has = ~np.all(np.isnan(matrices), axis=(2, 3))
+    pr, kr = np.nonzero(has)
+    if pr.size == 0:
+        return go, gd, similar, ok
+    distinct, which = np.unique(matrices[pr, kr].reshape(-1, 16), axis=0, return_inverse=True)
+    which = which.reshape(-1)
+    inverses = np.zeros((distinct.shape[0], 4, 4))
+    moves = np.zeros(distinct.shape[0], dtype=bool)  # not the identity: the ray is mapped
+    singular = np.zeros(distinct.shape[0], dtype=bool)
+    similarity = np.ones(distinct.shape[0], dtype=bool)
+    for u, row in enumerate(distinct):  # a handful of matrices, not one per point
+        mat = row.reshape(4, 4)
+        if np.array_equal(mat, IDENTITY):
+            continue
+        moves[u] = True
+        try:
+            inverses[u] = invert_affine(mat)
+        except InputError:
+            singular[u] = True
+            continue
+        similarity[u] = is_similarity(mat)
+    ok[pr[singular[which]]] = False
+    similar[pr[moves[which] & ~singular[which] & ~similarity[which]]] = False
+    for u in np.flatnonzero(moves & ~singular).tolist():  # the same arithmetic as per point
+        p_u, k_u = pr[which == u], kr[which == u]
+        go[p_u, k_u] = apply_points(inverses[u], o[p_u, k_u])
+        gd[p_u, k_u] = apply_directions(inverses[u], d[p_u, k_u])
+    with np.errstate(invalid="ignore", over="ignore"):
+        ok &= np.all(np.isfinite(go), axis=(1, 2)) & np.all(np.isfinite(gd), axis=(1, 2))
+        ok &= np.all(np.linalg.norm(go, axis=2) <= limits.MAX_ORIGIN_M, axis=1)
+    return go, gd, similar, ok
 
 
 def _kept(a: np.ndarray, keep: np.ndarray, n_keep: int) -> np.ndarray:
@@ -488,7 +563,7 @@ def _finish(points: Sequence[BatchPoint], s: _Solved, settings: SolveSettings,
             max_angle_deg=max_angle[k], condition=condition[k], outliers=r["sol_flags"][k],
             warnings=s.warnings[k], ranges_m=r["ranges"][k], outlier_ratio=r["ratios"][k],
             model=s.model[k], iterations=s.iterations[k])
-        warnings = s.warnings[k] + s.notes[k]
+        warnings = s.before[k] + s.warnings[k] + s.notes[k]
         if g is not None:
             warnings += g.warnings
         results[i] = Measurement(
