@@ -264,6 +264,10 @@ def test_model_matrices_equal_measure_point(fallbacks):
         assert_same(g, r)
     assert sum(isinstance(g, Measurement) and any("not a rotation with uniform scale" in w
                                                   for w in g.warnings) for g in got) == 3
+    same = [points[k] for k in (4, 8, 16, 20)]  # one matrix on every ray of the batch
+    for g, r in zip(measure_batch(same, settings), reference(same, settings), strict=True):
+        assert_same(g, r)
+    assert fallbacks == []
     g = got[0]
     assert isinstance(g, Measurement)  # mapped back to where the rays were aimed from
     assert np.linalg.norm(g.ray_origins_ecef - rays_of(points[0]).origins, axis=1).max() > 1.0

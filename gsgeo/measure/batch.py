@@ -23,11 +23,11 @@ Rays under a viewer modelMatrix are georeferenced by each distinct matrix's inve
 :func:`gsgeo.crs.modelmatrix.rendered_to_georeferenced` does). Anything the fast path does not
 cover (a singular modelMatrix, ifov on some rays only, fewer than 2 rays or an exclusion
 measure_point refuses, parallel rays, a point behind a camera, an unusable ENU origin) goes
-through ``measure_point`` itself, so errors and their messages are
-the same. What may differ: floats by rounding (coordinates ~1e-9 m; grid covariances by the
-~1e-7 relative that their forward-difference Jacobian already moves when a point moves by one
-ulp), ``solution.iterations`` (the batch solver reports its group's count) and
-``measured_at`` (one time for the batch).
+through ``measure_point`` itself, so errors and their messages are the same. What may differ:
+floats by rounding (coordinates ~1e-9 m; grid covariances by the ~1e-7 relative that their
+forward-difference Jacobian already moves when a point moves by one ulp),
+``solution.iterations`` (the batch solver reports its group's count) and ``measured_at`` (one
+time for the batch).
 """
 
 from __future__ import annotations
@@ -379,8 +379,12 @@ def _georeferenced(o: FloatArray, d: FloatArray, matrices: FloatArray | None
     pr, kr = np.nonzero(has)
     if pr.size == 0:
         return go, gd, similar, ok
-    distinct, which = np.unique(matrices[pr, kr].reshape(-1, 16), axis=0, return_inverse=True)
-    which = which.reshape(-1)
+    flat = matrices[pr, kr].reshape(-1, 16)
+    if np.all(flat == flat[0]):  # the usual case: one modelMatrix for the whole scene
+        distinct, which = flat[:1], np.zeros(flat.shape[0], dtype=np.int64)
+    else:
+        distinct, which = np.unique(flat, axis=0, return_inverse=True)
+        which = which.reshape(-1)
     inverses = np.zeros((distinct.shape[0], 4, 4))
     moves = np.zeros(distinct.shape[0], dtype=bool)  # not the identity: the ray is mapped
     singular = np.zeros(distinct.shape[0], dtype=bool)
