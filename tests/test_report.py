@@ -9,6 +9,7 @@ import io
 import math
 import re
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pypdf
@@ -222,6 +223,17 @@ def test_html_is_self_contained_with_tables_figures_and_escaped_text(svc, monkey
     assert not re.search(r'(src|href)="(?!data:)', html) and "<link" not in html
     stats = data["accuracy"]["asprs"]["statistics"]
     assert fmt_mm(stats["RMSE_H"]) in html and fmt_mm(stats["RMSE_3D"]) in html
+
+
+def test_reports_drawn_at_once_in_threads_equal_one_drawn_alone(svc, monkeypatch):
+    """A server draws reports in parallel threads: each comes out as if drawn alone (the
+    figures' settings are matplotlib's global state while a figure is drawn)."""
+    monkeypatch.setattr(svc, "georeference_status", lambda pid: STATUS, raising=False)
+    data = report_data(svc, "wharf", generated_at="2026-01-01T00:00:00Z")
+    alone = render(data, "html")
+    with ThreadPoolExecutor(3) as pool:
+        together = list(pool.map(lambda _: render(data, "html"), range(3)))
+    assert all(t == alone for t in together)
 
 
 def test_pdf_is_read_back_with_project_name_and_rmse(svc, monkeypatch):

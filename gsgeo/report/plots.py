@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import io
 import math
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -28,6 +29,11 @@ if TYPE_CHECKING:
 
 # Grid coordinates are shown whole (no "+5.71e6" offset a reader must add back).
 DPI = 200
+#: Points labelled with their ids (and dH) on a plan at most; beyond, labels would hide it.
+MAX_LABELS = 60
+#: rc_context sets matplotlib's global rcParams for its duration: one figure at a time, so
+#: a server drawing two reports at once never draws with the other's (or default) settings.
+_LOCK = threading.Lock()
 RC: dict[RcKeyType, Any] = {
     "font.size": 8.0,
     "axes.formatter.useoffset": False, "axes.formatter.limits": (-9, 12),
@@ -74,8 +80,8 @@ def residual_plan(vectors: Sequence[Vector], title: str) -> str | None:
     """Horizontal residual vectors on a plan (PNG data URI), None when nothing is plotted.
 
     Arrows are exaggerated so the longest is about a tenth of the plan's extent; a
-    reference arrow states the scale in millimetres. Each point is labelled with its id
-    and dH in millimetres.
+    reference arrow states the scale in millimetres. Up to MAX_LABELS points are labelled
+    with their id and dH in millimetres.
     """
     v = [x for x in vectors if math.isfinite(x.easting) and math.isfinite(x.northing)]
     if not v:
@@ -87,7 +93,7 @@ def residual_plan(vectors: Sequence[Vector], title: str) -> str | None:
     extent = max(float(np.ptp(e)), float(np.ptp(n)), 1.0)
     longest = float(np.max(np.hypot(de, dn))) if len(v) else 0.0
     exaggeration = 0.1 * extent / longest if longest > 0 else 1.0
-    with matplotlib.rc_context(RC):
+    with _LOCK, matplotlib.rc_context(RC):
         fig = _figure(6.3, 5.0)
         ax = fig.add_subplot()
         for style in ("control", "check", "excluded", "outlier"):
@@ -102,7 +108,7 @@ def residual_plan(vectors: Sequence[Vector], title: str) -> str | None:
             ax.quiver(e[sel], n[sel], de[sel] * exaggeration, dn[sel] * exaggeration,
                       angles="xy", scale_units="xy", scale=1.0, color=COLOURS[style],
                       width=0.004, zorder=4)
-        for x, xe, xn in zip(v, e, n, strict=True):
+        for x, xe, xn in zip(v, e, n, strict=True) if len(v) <= MAX_LABELS else ():
             dh = "" if not math.isfinite(x.dh) else f" dH {x.dh * 1000:+.1f}"
             ax.annotate(f"{x.id}{dh}", (xe, xn), xytext=(4, -9), textcoords="offset points",
                         fontsize=6.5, color="#222222")
@@ -134,14 +140,14 @@ def height_residuals(ids: Sequence[str], dh: Sequence[float], styles: Sequence[s
     ok = np.isfinite(vals)
     if not ok.any():
         return None
-    with matplotlib.rc_context(RC):
+    with _LOCK, matplotlib.rc_context(RC):
         fig = _figure(6.3, 2.4)
         ax = fig.add_subplot()
         idx = np.nonzero(ok)[0]
         ax.bar(np.arange(idx.size), vals[idx] * 1000,
                color=[COLOURS.get(styles[int(i)], COLOURS["point"]) for i in idx])
         ax.axhline(0.0, color="black", linewidth=0.6)
-        if idx.size <= 60:
+        if idx.size <= MAX_LABELS:
             ax.set_xticks(np.arange(idx.size), [str(ids[int(i)]) for i in idx], rotation=90,
                           fontsize=6.5)
         else:
@@ -156,14 +162,14 @@ def points_plan(ids: Sequence[str], easting: Sequence[float], northing: Sequence
                 sigma_e: Sequence[float | None], sigma_n: Sequence[float | None],
                 title: str) -> str | None:
     """The measured points on a plan, coloured by horizontal 1-sigma (mm); ids are written
-    when there are at most 60 points. None without points."""
+    when there are at most MAX_LABELS points. None without points."""
     e = np.array(easting, dtype=float)
     n = np.array(northing, dtype=float)
     if not e.size:
         return None
     s = np.array([math.nan if a is None or b is None else math.hypot(a, b) * 1000
                   for a, b in zip(sigma_e, sigma_n, strict=True)], dtype=float)
-    with matplotlib.rc_context(RC):
+    with _LOCK, matplotlib.rc_context(RC):
         fig = _figure(6.3, 4.6)
         ax = fig.add_subplot()
         finite = s[np.isfinite(s)]
@@ -173,7 +179,7 @@ def points_plan(ids: Sequence[str], easting: Sequence[float], northing: Sequence
         sc = ax.scatter(e, n, c=s, s=10 if e.size > 200 else 18, cmap="viridis", zorder=3,
                         vmin=lo, vmax=hi)
         fig.colorbar(sc, ax=ax, label="horizontal σ (sqrt(σE² + σN²)) [mm]", shrink=0.8)
-        if e.size <= 60:
+        if e.size <= MAX_LABELS:
             for i, xe, xn in zip(ids, e, n, strict=True):
                 ax.annotate(str(i), (xe, xn), xytext=(3, 3), textcoords="offset points",
                             fontsize=6.5)
