@@ -19,7 +19,7 @@ from crs_helpers import camera_origins, model_matrix, noisy_directions
 
 import gsgeo.measure.batch as batch
 from gsgeo.crs.frames import EnuFrame, geodetic_to_ecef
-from gsgeo.errors import DatumError
+from gsgeo.errors import DatumError, InputError
 from gsgeo.measure.batch import measure_batch, snoop_many
 from gsgeo.measure.framecov import FrameCovariance
 from gsgeo.measure.point import measure_point, measure_points
@@ -440,3 +440,5 @@ def test_a_crs_problem_of_the_whole_set_is_raised_once_as_measure_points_does():
         measure_points([p[:4] for p in points], settings)
     assert str(ours.value) == str(theirs.value)
     assert measure_batch([], settings) == []
+    with pytest.raises(InputError, match="needs a grid CRS"):  # checked before any point
+        measure_batch(points, SolveSettings(vertical="EPSG:5701"))
