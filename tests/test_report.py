@@ -24,7 +24,7 @@ with warnings.catch_warnings():
 from gsgeo.cli import main
 from gsgeo.measure.accuracy import accuracy_report, asprs_accuracy
 from gsgeo.report import render
-from gsgeo.report.content import fmt_mm
+from gsgeo.report.content import fmt_m, fmt_mm
 from gsgeo.server.app import ServerConfig, create_app
 from gsgeo.service import open_projects
 from gsgeo.service.checkpoints import CheckPointRow
@@ -261,7 +261,11 @@ def test_a_project_without_grid_georeference_or_check_points_still_reports(tmp_p
     finally:
         svc.store.close()
     assert data["accuracy"]["asprs"] is None and "no check points" in data["accuracy"]["note"]
-    assert "not tested against check points" in html and "No point has grid coordinates" in html
+    assert "not tested against check points" in html and "Measured points (1)" in html
+    (row,) = data["ecef_points"]
+    assert row["point_id"] == "A" and data["points"] == [] and data["failed_points"] == []
+    assert np.allclose([row["x"], row["y"], row["z"]], ecef_of(0.0, 0.0, 0.0), atol=1e-6)
+    assert fmt_m(row["x"]) in html
 
 
 def test_an_unapplied_fit_is_reported_as_proposed(svc):

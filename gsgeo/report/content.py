@@ -438,13 +438,25 @@ def _points_section(data: JSONObject) -> Section:
               fmt_g(r.get("sigma0"), 3)] for r in pts],
             caption="1σ in millimetres: total (aiming and georeference) and measurement-only "
                     "(aiming alone)."))
-    else:
-        blocks.append(Notes(["No point has grid coordinates."]))
+    ecef = data.get("ecef_points") or []
+    if ecef:
+        blocks.append(_table(
+            [("Point", False), ("Code", False), ("X [m]", True), ("Y [m]", True),
+             ("Z [m]", True), ("σX [mm]", True), ("σY [mm]", True), ("σZ [mm]", True),
+             ("rays", True), ("σ0", True)],
+            [[str(r["point_id"]), fmt_text(r.get("code")) if r.get("code") else "",
+              fmt_m(r.get("x")), fmt_m(r.get("y")), fmt_m(r.get("z")),
+              fmt_mm(r.get("sigma_x")), fmt_mm(r.get("sigma_y")), fmt_mm(r.get("sigma_z")),
+              fmt_text(r.get("n_rays")), fmt_g(r.get("sigma0"), 3)] for r in ecef],
+            caption="Without a grid CRS: the points in the scene's geocentric frame (ECEF, as "
+                    "rendered), with their total 1σ along its axes."))
+    if not pts and not ecef:
+        blocks.append(Notes(["No point has been measured."]))
     if failed:
         blocks.append(_table([("Point", False), ("Not solved because", False)],
                              [[str(r["point_id"]), str(r["error"])] for r in failed],
                              ["failed"] * len(failed)))
-    return Section(f"Measured points ({len(pts)})", "points", blocks)
+    return Section(f"Measured points ({len(pts) + len(ecef)})", "points", blocks)
 
 
 def _summary(data: JSONObject) -> Facts:
@@ -454,7 +466,8 @@ def _summary(data: JSONObject) -> Facts:
     rows: list[tuple[str, str]] = [
         ("Project", str(p["name"])), ("Scene", fmt_text(p.get("scene"))),
         ("Grid CRS", fmt_text(p.get("crs"))),
-        ("Points measured", str(len(data.get("points") or []))),
+        ("Points measured", str(len(data.get("points") or [])
+                                 + len(data.get("ecef_points") or []))),
         ("Scene georeferenced", DASH if not geo else ("yes" if geo.get("georeferenced")
                                                        else "NO (default origin)")),
     ]

@@ -167,17 +167,36 @@ def _accuracy(svc: Projects, pid: str, p: Project, cps: list[CheckPointRecord],
             "heights": acc.get("heights")}
 
 
-def _point_rows(points: list[PointRecord]) -> tuple[list[JSONObject], list[JSONObject]]:
-    """(solved rows with POINT_COLUMNS, failed points with their reason)."""
-    solved: list[JSONObject] = []
+def _ecef_row(q: PointRecord) -> JSONObject | None:
+    """A point solved without a grid: its id, ECEF X, Y, Z (m) and their total 1-sigma (m)."""
+    res = q.result or {}
+    try:
+        xyz = [float(v) for v in res["point_ecef"]]
+        cov = np.asarray(res.get("cov_ecef_total") or res.get("cov_ecef"), dtype=float)
+        sig = np.sqrt(np.clip(np.diag(cov.reshape(3, 3)), 0.0, None)).tolist()
+    except (KeyError, TypeError, ValueError):
+        return None
+    return {"point_id": q.id, "code": q.code, "x": xyz[0], "y": xyz[1], "z": xyz[2],
+            "sigma_x": sig[0], "sigma_y": sig[1], "sigma_z": sig[2],
+            "n_rays": res.get("n_rays"), "sigma0": res.get("sigma0")}
+
+
+def _point_rows(points: list[PointRecord]) -> tuple[list[JSONObject], list[JSONObject],
+                                                     list[JSONObject]]:
+    """(rows in the grid with POINT_COLUMNS, rows solved without a grid in ECEF, points that
+    could not be solved with their reason)."""
+    grid: list[JSONObject] = []
+    ecef: list[JSONObject] = []
     failed: list[JSONObject] = []
     for q in points:
-        if q.record is None or q.record.get("easting") is None:
+        if q.record is not None and q.record.get("easting") is not None:
+            grid.append({k: q.record.get(k) for k in POINT_COLUMNS})
+        elif q.result is not None and (row := _ecef_row(q)) is not None:
+            ecef.append(row)
+        else:
             failed.append({"point_id": q.id, "code": q.code,
-                           "error": q.error or "no grid coordinates (the project has no grid CRS)"})
-            continue
-        solved.append({k: q.record.get(k) for k in POINT_COLUMNS})
-    return solved, failed
+                           "error": q.error or "not solved with the current settings"})
+    return grid, ecef, failed
 
 
 def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
@@ -192,7 +211,7 @@ def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
     points = svc.list_points(pid)
     cps = svc.list_check_points(pid)
     records = {q.id: q.record for q in points if q.record is not None}
-    solved, failed = _point_rows(points)
+    solved, ecef, failed = _point_rows(points)
     control = [c for c in cps if c.role == "control"]
     doc: dict[str, Any] = {
         "generated": {"at": generated_at or _now(), "by": f"gsgeo {__version__}"},
@@ -205,6 +224,7 @@ def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
         "georeference": _georeference(svc, pid, georeference),
         "accuracy": _accuracy(svc, pid, p, cps, records),
         "points": solved,
+        "ecef_points": ecef,
         "failed_points": failed,
         "check_points": {"check": sum(1 for c in cps if c.role == "check"),
                          "control": len(control)},
