@@ -206,3 +206,97 @@ console.log(JSON.stringify({
     assert ids["removed"] == [("P2", 1), ("P3", 1)]
     assert ids["missing"] == ids["same"] == [("P1", 1), ("P2", 1), ("P3", 1)]  # never mutated
     assert got["uses"] == [True, True, False]
+
+
+def run_module_js(module: str, body: str, data) -> object:
+    """Run `body` with web/js/`module` imported as S and `data` bound; it prints one JSON value."""
+    src = (f"import * as S from '{(WEB_JS / module).as_uri()}';\n"
+           f"const data = {json.dumps(data)};\n{body}\n")
+    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
+                         text=True, check=True, timeout=60)
+    return json.loads(out.stdout)
+
+
+def _similarity(s: float, axis, deg: float, t) -> np.ndarray:
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    th = np.radians(deg)
+    m = np.eye(4)
+    m[:3, :3] = s * (np.eye(3) + np.sin(th) * k + (1 - np.cos(th)) * k @ k)
+    m[:3, 3] = t
+    return m
+
+
+def test_similarity_parameters_and_camera_match_numpy():
+    """web/js/similarity.js: a georeference similarity (column-major) as scale, ppm, angle
+    and axis; the camera carried by it (position S p, direction and up turned) keeps the
+    angle between any two viewing directions and puts S x where x was on the screen."""
+    m = _similarity(0.37, [0.3, -0.5, 0.8], 25.0, [3.9e6, -8.3e3, 4.97e6])
+    cam = {"position": [6378150.0, 4.5, 7.8], "direction": [-0.6, -0.4, -0.69],
+           "up": [0.8, -0.3, -0.5]}
+    got = run_module_js("similarity.js", """
+const m = data.m;
+console.log(JSON.stringify({d: S.decompose(m), cam: S.moveCamera(m, data.cam),
+  x: S.applySimilarity(m, [1, 2, 3]), id: S.decompose([1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1])}));""",
+                        {"m": m.T.reshape(-1).tolist(), "cam": cam})
+    d = got["d"]
+    assert d["scale"] == pytest.approx(0.37, rel=1e-12)
+    assert d["ppm"] == pytest.approx(-630000.0, rel=1e-9)
+    assert d["angleDeg"] == pytest.approx(25.0, rel=1e-9)
+    assert np.allclose(d["axis"], np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8]))
+    assert np.allclose(d["translation"], m[:3, 3])
+    assert got["id"]["scale"] == 1 and got["id"]["angleDeg"] == 0 and got["id"]["ppm"] == 0
+    q = m[:3, :3] / 0.37
+    assert np.allclose(got["x"], m[:3, :3] @ [1, 2, 3] + m[:3, 3])
+    assert np.allclose(got["cam"]["position"], m[:3, :3] @ cam["position"] + m[:3, 3], atol=1e-6)
+    assert np.allclose(got["cam"]["direction"], q @ cam["direction"])
+    assert np.allclose(got["cam"]["up"], q @ cam["up"])
+    # a point x seen along p -> x is seen along the moved direction from the moved camera
+    x = np.array(cam["position"]) + 7.0 * np.array(cam["direction"])
+    seen = (m[:3, :3] @ x + m[:3, 3]) - np.array(got["cam"]["position"])
+    assert np.allclose(seen / np.linalg.norm(seen),
+                       np.array(got["cam"]["direction"]) / np.linalg.norm(cam["direction"]))
+
+
+def test_georeference_state_of_scenes_and_tilesets():
+    """The banner shows on a scene that was never fitted or sits at lat 0, lon 0; the version
+    sent with every stored point is the tileset's extras.gsgeo.georef.version, 0 without it."""
+    got = run_module_js("similarity.js", """
+console.log(JSON.stringify({
+  banner: data.scenes.map((s) => S.notGeoreferenced(s)),
+  version: [S.georefVersion(undefined), S.georefVersion({}), S.georefVersion({gsgeo: {}}),
+            S.georefVersion({gsgeo: {georef: {version: 3}}}),
+            S.georefVersion({gsgeo: {georef: {version: -1}}})],
+}));""", {"scenes": [
+        {"georeferenced": False, "origin": {"lat": 51.5, "lon": -0.1}},
+        {"georeferenced": None, "origin": {"lat": 0.0, "lon": 0.0}},
+        {"georeferenced": True, "origin": {"lat": 51.5, "lon": -0.1}},
+        {"georeferenced": None, "origin": None}, None]})
+    assert got["banner"] == [True, True, False, False, False]
+    assert got["version"] == [0, 0, 0, 3, 0]
+
+
+def test_apply_confirmation_says_what_changes():
+    """The Apply confirmation names the scale in ppm, the rotation angle, how far the scene's
+    centre moves, accepted outliers and the points of every project on the scene re-solved."""
+    m = _similarity(1.0002, [0, 0, 1], 0.5, [1.0, 2.0, 2.0])
+    centre = [10.0, 0.0, 0.0]
+    got = run_module_js("similarity.js", "console.log(JSON.stringify(S.applySummary(data.fit, "
+                        "data.centre, data.projects)));",
+                        {"fit": {"matrix": m.T.reshape(-1).tolist(), "scale_sigma": 3e-6,
+                                 "translation": m[:3, 3].tolist(), "outliers": ["GCP4"]},
+                         "centre": centre,
+                         "projects": [{"name": "a", "points": 12}, {"name": "b", "points": 3}]})
+    text = "\n".join(got)
+    assert "Scale: × 1.000200 (+200 ppm ± 3.0 ppm)" in text, text
+    assert "Rotation: 0.5000° about the axis (0.000, 0.000, 1.000)" in text, text
+    shift = np.linalg.norm(m[:3, :3] @ centre + m[:3, 3] - centre)
+    assert f"the scene's centre moves {shift:.3f} m" in text, text
+    assert "Outliers kept in the fit (you accept them): GCP4" in text
+    assert "Re-solved: 15 points in 2 projects on this scene (a: 12, b: 3)" in text
+
+
+def test_no_tool_takes_the_georeference_key():
+    """G opens the Georeference panel (main.js): no tool may have it as its shortcut."""
+    got = run_tools_js("console.log(JSON.stringify(T.TOOLS.map((t) => t.shortcut || '')));")
+    assert "G" not in [s.upper() for s in got]

@@ -8,6 +8,8 @@ import { applyPoint, applyDirection, norm, sub, IDENTITY16 } from "./linalg.js";
 import { upsert, usesAny, without } from "./merge.js";
 import { $, fixed, mm, h, measuresText } from "./format.js";
 import { TOOLS, activeTool, activate, handlerOf, release, toolByShortcut } from "./tools/index.js";
+import { georefPanel } from "./georef.js";
+import { georefVersion, moveCamera } from "./similarity.js";
 
 const Cesium = window.Cesium;
 
@@ -64,7 +66,13 @@ window.gsgeo = {
   Cesium,
   get tileset() { return state.tileset; },
   get state() { return state; },
+  /** the loaded tileset's georeference version (extras.gsgeo.georef.version, 0 when absent) */
+  get georefVersion() { return currentGeorefVersion(); },
 };
+
+function currentGeorefVersion() {
+  return state.tileset ? georefVersion(state.tileset.extras) : 0;
+}
 
 function modelMatrix() {
   return state.tileset ? Cesium.Matrix4.toArray(state.tileset.modelMatrix) : IDENTITY16.slice();
@@ -103,7 +111,9 @@ async function loadScenes() {
     ...state.scenes.map((s) => h("option", { value: s.name }, s.name)));
 }
 
-async function loadScene(name) {
+/** Load scene `name`; the camera views the whole scene, or takes `view` ({position,
+ *  direction, up}, ECEF) when given (the same feature after a georeference change). */
+async function loadScene(name, view = null) {
   if (state.tileset) {
     viewer.scene.primitives.remove(state.tileset);
     state.tileset = null;
@@ -134,8 +144,14 @@ async function loadScene(name) {
     state.tileset = tileset;
     state.sceneName = name;
     lastModelMatrix = modelMatrix();
-    const r = tileset.boundingSphere.radius;
-    await viewer.zoomTo(tileset, new Cesium.HeadingPitchRange(0.4, -0.6, r * 2.2));
+    if (view) {
+      const c3 = (v) => new Cesium.Cartesian3(v[0], v[1], v[2]);
+      viewer.camera.setView({ destination: c3(view.position),
+        orientation: { direction: c3(view.direction), up: c3(view.up) } });
+    } else {
+      const r = tileset.boundingSphere.radius;
+      await viewer.zoomTo(tileset, new Cesium.HeadingPitchRange(0.4, -0.6, r * 2.2));
+    }
   } catch (exc) {
     msg.hidden = false;
     msg.textContent = `Scene '${name}' cannot be loaded: ${exc.message || exc}`;
@@ -143,6 +159,25 @@ async function loadScene(name) {
   setUrl();
   redrawAll();
   updateStatus();
+  georef.banner();
+}
+
+/** The server changed the scene's root transform by similarity `sim16` (column-major, old
+ *  ECEF -> new ECEF) and re-solved the points: reload the tileset, carry the camera by it
+ *  (the view stays on the same feature) and fetch the re-solved points. */
+async function georeferenceChanged(sim16) {
+  const cam = viewer.camera;
+  const arr = (c) => [c.x, c.y, c.z];
+  const view = moveCamera(sim16, { position: arr(cam.positionWC), direction: arr(cam.directionWC), up: arr(cam.upWC) });
+  await loadScenes();
+  await loadScene(state.sceneName, view);
+  await refreshProjectData();
+}
+
+function sceneCentre() {
+  if (!state.tileset) return null;
+  const c = state.tileset.boundingSphere.center;
+  return [c.x, c.y, c.z];
 }
 
 // ---------------------------------------------------------------------------------------
@@ -179,6 +214,7 @@ async function openProject(pid) {
     state.project = null;
     state.points = []; state.lines = []; state.polygons = [];
     renderAll();
+    georef.refresh();
     return;
   }
   state.project = await api("GET", `/projects/${encodeURIComponent(pid)}`);
@@ -206,6 +242,7 @@ async function refreshProjectData() {
   state.checkPoints = cps.check_points.length;
   renderAll();
   await refreshAccuracy();
+  georef.refresh();
 }
 
 // After a store the server's answer goes into the state (merge.js); only what the server
@@ -225,6 +262,7 @@ async function pointStored(pt, oldId = pt.id) {
   if (polys) state.polygons = polys.polygons;
   renderAll();
   await refreshAccuracy();
+  georef.refresh();
 }
 
 /** Point `id` is deleted (the server refuses while a line or polygon uses it). */
@@ -233,6 +271,7 @@ async function pointDeleted(id) {
   if (state.selected === id) state.selected = null;
   renderAll();
   await refreshAccuracy();
+  georef.refresh();
 }
 
 /** Line or polygon `f` as the server stored it, with its measures. */
@@ -375,8 +414,11 @@ function confScale() { return state.conf === "95" ? SCALE_95_3D : 1; }
 const ctx = {
   state, viewer, draw, message, fail, modelMatrix, solveSettings, confScale,
   pointById, nearestPoint, selectPoint, updateStatus, pointStored, featureStored,
+  georefVersion: currentGeorefVersion,
   done: () => release(ctx),
 };
+
+const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged });
 
 // ---------------------------------------------------------------------------------------
 // points
@@ -573,9 +615,12 @@ async function importCheckPoints(ev) {
   const crs = $("#check-crs").value.trim() || (file.name.toLowerCase().endsWith(".csv") ? state.project.crs : "");
   if (crs) form.append("crs", crs);
   form.append("replace", $("#check-replace").checked ? "true" : "false");
+  const role = $("#check-role").value;
+  form.append("role", role);
   try {
     const r = await api("POST", `/projects/${encodeURIComponent(state.project.id)}/checkpoints/import`, form);
-    message(`Imported ${r.imported} check points (${r.crs}).`);
+    message(`Imported ${r.imported} ${role === "control" ? "control" : "check"} points (${r.crs}).`);
+    georef.refresh();
     // an import adds or replaces check points by id: the server counts them
     const cps = await api("GET", `/projects/${encodeURIComponent(state.project.id)}/checkpoints`);
     state.checkPoints = cps.check_points.length;
@@ -705,6 +750,10 @@ document.addEventListener("keydown", (ev) => {
     if (ev.key === "Escape") { $("#project-dialog").hidden = true; ev.preventDefault(); }
     return;
   }
+  if (georef.confirming) {
+    if (ev.key === "Escape") { georef.closeConfirm(); ev.preventDefault(); }
+    return;
+  }
   // Enter and Escape typed in a tool's panel (its code, description, ...) go to the tool
   const inPanel = typing && t.closest("[data-tool-panel]");
   if (typing && !(inPanel && (ev.key === "Enter" || ev.key === "Escape"))) return;
@@ -716,6 +765,7 @@ document.addEventListener("keydown", (ev) => {
   const shortcut = toolByShortcut(key);
   if (shortcut) { activate(ctx, shortcut.id); ev.preventDefault(); }
   else if (key === "e" || key === "E") { setConf(state.conf === "95" ? "1" : "95"); ev.preventDefault(); }
+  else if (key === "g" || key === "G") { georef.toggle(); ev.preventDefault(); }
   else if (key === "?" || key === "h" || key === "H") { toggleHelp(true); ev.preventDefault(); }
   else if (key === "Escape" && state.selected) { selectPoint(null, false); }
 });

@@ -2,7 +2,8 @@
 // two rays on the server intersects them (/api/intersect) and the panel shows the solution,
 // its error ellipsoid and each ray's residual; Enter stores the point (new, or a stored point
 // reopened with "Add rays"). Its state is state.measure:
-// {rays, excluded: Set, editing, pointId, solution, error, seq}.
+// {rays, excluded: Set, editing, pointId, solution, error, seq, georefVersion}; a new point is
+// stored with the georeference version of the tileset its first ray was taken in.
 
 import { api } from "../api.js";
 import { COLORS, cart } from "../draw.js";
@@ -190,7 +191,10 @@ const measure = {
   click(ctx, event) {
     const ray = captureRay(ctx.viewer, event.position, ctx.modelMatrix());
     if (!ray) { ctx.message("This click gives no ray (is the camera perspective?).", true); return; }
-    ctx.state.measure.rays.push(ray);
+    const m = ctx.state.measure;
+    // the scene's georeference version the rays are taken in, stored with the point
+    if (!m.rays.length) m.georefVersion = ctx.georefVersion();
+    m.rays.push(ray);
     solveLive(ctx);
     ctx.updateStatus();
   },
@@ -222,7 +226,9 @@ const measure = {
         pt = await api("PATCH", url, { rays: m.rays, excluded, code, description });
       } else {
         const id = ($("#pt-id").dataset.auto !== "1" && $("#pt-id").value.trim()) || undefined;
-        pt = await api("POST", `/projects/${pid}/points`, { id, code, description, rays: m.rays, excluded });
+        pt = await api("POST", `/projects/${pid}/points`, {
+          id, code, description, rays: m.rays, excluded, georef_version: m.georefVersion ?? ctx.georefVersion(),
+        });
       }
       end(ctx);
       await ctx.pointStored(pt, m.editing || pt.id);
