@@ -275,6 +275,19 @@ def test_an_unapplied_fit_is_reported_as_proposed(svc):
     assert "no (a proposed fit)" in html and "Control residuals" in html
 
 
+def test_a_scale_only_fit_shows_its_distances_and_no_rotation(svc):
+    fit = {"kind": "scale", "scale": 2.5, "scale_sigma": 0.0005, "scale_ppm": 1.5e6,
+           "rotation": np.eye(3).tolist(), "translation": [1.0, 2.0, 3.0], "sigma0": 0.8,
+           "dof": 1, "distances": [{"from": "A", "to": "B", "distance": 12.3, "measured": 4.92,
+                                    "sigma": 0.002, "scaled": 12.3012, "residual": 0.0012}],
+           "control": [], "check": [], "rmse_control": None, "rmse_check": None,
+           "outliers": [], "without_outliers": None, "grid_crs": None, "warnings": [],
+           "applied": True}
+    html = render(report_data(svc, "wharf", georeference=fit), "html").decode()
+    assert "Scale only" in html and "Known distances" in html and "+1.2" in html
+    assert "rotation matrix" not in html and "translation X" not in html
+
+
 # the command line -------------------------------------------------------------------------------
 def test_cli_writes_the_pdf_and_html(data_dir, tmp_path, capsys):
     out = tmp_path / "out"

@@ -203,6 +203,11 @@ def _parameters(g: JSONObject) -> Table:
     rows = [["scale s", fmt_g(scale, 10), fmt_g(s_sigma, 3), rel]]
     if scale is not None and abs(scale - 1) < 0.01:
         rows.append(["scale change s − 1", f"{(scale - 1) * 1e6:+.1f} ppm", DASH, ""])
+    if g.get("kind") == "scale":
+        return _table([("Parameter", False), ("Value", True), ("σ", True),
+                       ("σ relative", True)], rows,
+                      caption="Scale only: the scene keeps its local frame (no rotation, "
+                              "no grid), its lengths become metres.")
     rows += [[f"translation {a} (ECEF) [m]", fmt_m(t[i], 4), DASH, ""] for i, a in enumerate("XYZ")]
     rows.append(["rotation angle", _rotation_angle(g.get("rotation")), DASH, ""])
     rot = g.get("rotation") or []
@@ -220,9 +225,13 @@ def _precision(p: JSONObject, g: JSONObject) -> Table:
     rot = p.get("rotation_enu_arcsec") or [None] * 3
     c = p.get("centre") or {}
     ts = ", ".join(fmt_g(v, 3) for v in (g.get("translation_sigma") or []))
-    rows = [[f"shift {a}", fmt_mm(sh[i]) + " mm"] for i, a in enumerate(("east", "north", "up"))]
-    rows += [[f"rotation about {a}", DASH if _num(rot[i]) is None else f"{float(rot[i]):.2f}″"]
-             for i, a in enumerate(("east", "north", "up"))]
+    rows: list[list[str]] = []
+    if g.get("kind") != "scale":  # a scale-only fit has no shift or rotation
+        rows += [[f"shift {a}", fmt_mm(sh[i]) + " mm"]
+                 for i, a in enumerate(("east", "north", "up"))]
+        rows += [[f"rotation about {a}",
+                  DASH if _num(rot[i]) is None else f"{float(rot[i]):.2f}″"]
+                 for i, a in enumerate(("east", "north", "up"))]
     rows.append(["scale", f"{fmt_g(p.get('scale_ppm'), 3)} ppm"])
     return _table([("1σ of the georeference", False), ("at the control centroid", True)], rows,
                   caption=f"The fit's uncertainty about the control centroid (lat "
@@ -255,6 +264,16 @@ def _georef_blocks(status: JSONObject, precision: JSONObject | None) -> list[Blo
     blocks.append(_parameters(g))
     if precision:
         blocks.append(_precision(precision, g))
+    distances = g.get("distances") or []
+    if distances:
+        blocks.append(_table(
+            [("From", False), ("To", False), ("Known [m]", True), ("σ [mm]", True),
+             ("Scaled [m]", True), ("Residual [mm]", True)],
+            [[str(d.get("from")), str(d.get("to")), fmt_m(d.get("distance"), 4),
+              fmt_mm(d.get("sigma")), fmt_m(d.get("scaled"), 4),
+              fmt_mm(d.get("residual"), signed=True)] for d in distances],
+            caption="Known distances: measured in the scene, scaled, and the residual "
+                    "(scaled minus known)."))
     control = g.get("control") or []
     if control:
         cols = [("Control", False), ("Status", False), ("dE [mm]", True), ("dN [mm]", True),
