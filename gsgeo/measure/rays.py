@@ -186,7 +186,19 @@ class Rays:
         lin = s[:3, :3]
         d2 = d @ lin.T
         d2 /= np.linalg.norm(d2, axis=1, keepdims=True)
-        return Rays(o @ lin.T + s[:3, 3], d2, self.ifov, self.pixels, self.viewports, None)
+        o2 = o @ lin.T + s[:3, 3]
+        if not (np.isfinite(o2).all() and np.isfinite(d2).all()
+                and np.all(np.hypot.reduce(o2, axis=1) <= limits.MAX_ORIGIN_M)):
+            return Rays(o2, d2, self.ifov, self.pixels, self.viewports, None)  # names it
+        # the rest was checked when these rays were made: unit directions, the same ifov
+        out = object.__new__(Rays)
+        for name, value in (("origins", o2), ("directions", d2), ("ifov", self.ifov),
+                            ("pixels", self.pixels), ("viewports", self.viewports),
+                            ("model_matrices", None)):
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(out, name, value)
+        return out
 
     def to_json(self) -> list[JSONObject]:
         """The session-JSON ray objects (README, "Session JSON"), members only where given."""

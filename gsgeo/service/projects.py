@@ -245,7 +245,7 @@ class Projects:
 
     def _remeasure_all(self, tx: Transaction, p: Project) -> None:
         ctx = scene_frame(self.data_dir, p.scene)
-        pts = tx.list_points(p.id)
+        pts = tx.list_points(p.id, results=False)  # all measured again below
         self._measure_many(pts, p, ctx)
         for pt in pts:
             tx.update_point(pt)
@@ -604,15 +604,18 @@ class Projects:
                          exclude: Sequence[str],
                          distances: Sequence[Distance] | None) -> tuple[Any, JSONObject]:
         """(solution, report) of the project's control (or known distances) as stored."""
-        measured = measured_from(tx.list_points(p.id))
+        refs = tx.list_check_points(p.id)
+        wanted = {c.id for c in refs} | ({x for d in distances for x in (d.a, d.b)}
+                                        if distances is not None else set())
+        measured = measured_from([q for q in (tx.get_point(p.id, i) for i in sorted(wanted))
+                                  if q is not None])
         if distances is not None:
             origin = origin_of(ctx.root) if ctx is not None else (
                 measured.ecef.mean(axis=0) if len(measured.ids) else np.zeros(3))
             sol = fit_scale(measured, distances, origin)
             return sol, sol.report
         settings = solve_settings(p.settings(), self.data_dir)
-        gsol = fit_control(measured, reference_from(tx.list_check_points(p.id)), settings,
-                           exclude=exclude)
+        gsol = fit_control(measured, reference_from(refs), settings, exclude=exclude)
         return gsol, gsol.report
 
     def georeference(self, pid: str, *, exclude: Sequence[str] = (), apply: bool = False,
@@ -695,7 +698,7 @@ class Projects:
         for q in tx.list_projects():
             if q.scene != scene:
                 continue
-            pts = tx.list_points(q.id)
+            pts = tx.list_points(q.id, results=False)  # all measured again below
             for pt in pts:
                 if pt.frame is None:
                     pt.frame = dict(pinned)

@@ -31,7 +31,9 @@ class Transaction(ABC):
 
     # points
     @abstractmethod
-    def list_points(self, pid: str) -> list[PointRecord]: ...
+    def list_points(self, pid: str, results: bool = True) -> list[PointRecord]:
+        """The project's points in creation order; ``results=False`` leaves their stored
+        results unread (None), for callers that are about to measure them again."""
     @abstractmethod
     def get_point(self, pid: str, point_id: str) -> PointRecord | None: ...
     @abstractmethod

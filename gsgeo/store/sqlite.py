@@ -128,8 +128,11 @@ class SQLiteTransaction(Transaction):
                            created_at=row["created_at"], updated_at=row["updated_at"],
                            frame=_loads(row["frame"]))
 
-    def list_points(self, pid: str) -> list[PointRecord]:
-        rows = self._all("SELECT * FROM points WHERE project_id = ? ORDER BY seq", (pid,))
+    def list_points(self, pid: str, results: bool = True) -> list[PointRecord]:
+        cols = "*" if results else ("project_id, id, seq, code, description, rays, excluded, "
+                                    "NULL AS result, error, solved_rev, created_at, updated_at, "
+                                    "frame")
+        rows = self._all(f"SELECT {cols} FROM points WHERE project_id = ? ORDER BY seq", (pid,))
         return [self._point(r) for r in rows]
 
     def get_point(self, pid: str, point_id: str) -> PointRecord | None:
