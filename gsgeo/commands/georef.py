@@ -204,18 +204,17 @@ def _project_mode(args: argparse.Namespace) -> JSONObject:
         report = svc.georeference(p.id, exclude=args.exclude, apply=args.apply is not None,
                                   accept_outliers=args.accept_outliers, distances=distances)
         if args.output:
-            _write_report(svc, p.id, args.output)
+            _write_report(svc, p.id, args.output, report)
         return report
     finally:
         svc.store.close()
 
 
-def _write_report(svc: Any, pid: str, output: str) -> None:
-    try:
-        from gsgeo.service.reporting import write_report
-    except ImportError:
-        raise InputError("the survey report is not available in this version") from None
-    write_report(svc, pid, Path(output))
+def _write_report(svc: Any, pid: str, output: str, fit: JSONObject) -> None:
+    """The survey report with this run's fit (shown as proposed unless it was applied)."""
+    from gsgeo.service.reporting import write_report
+
+    write_report(svc, pid, Path(output), georeference=None if fit.get("applied") else fit)
 
 
 def _table(r: JSONObject) -> str:

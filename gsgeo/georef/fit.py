@@ -230,12 +230,15 @@ def georeference(measured: Measured, reference: Reference, settings: SolveSettin
 def _summary(f: SimilarityFit, kind: str) -> JSONObject:
     """Parameters with sigmas of one fit (JSON)."""
     s = f.similarity
-    t_sigma = f.point_sigma(s.translation)
     return {"kind": kind, "scale": s.scale, "scale_sigma": f.scale_sigma(),
             "scale_ppm": (s.scale - 1.0) * 1e6,
             "rotation": s.rotation.tolist(),
             "rotation_sigma_deg": np.degrees(f.rotation_sigma_rad()).tolist(),
-            "translation": s.translation.tolist(), "translation_sigma": t_sigma.tolist(),
+            "translation": s.translation.tolist(),
+            # the shift's 1-sigma at the control's centre (t itself, the image of the Earth's
+            # centre, is kilometres uncertain through its correlation with the rotation)
+            "translation_sigma": np.sqrt(np.clip(np.diag(f.covariance)[:3], 0, None)).tolist(),
+            "centre_ecef": f.centre.tolist(),
             "matrix": [float(v) for v in s.matrix().T.reshape(-1)],
             "sigma0": f.sigma0, "dof": f.dof, "global_test_p": f.global_p,
             "iterations": f.iterations}

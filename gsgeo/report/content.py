@@ -224,7 +224,6 @@ def _precision(p: JSONObject, g: JSONObject) -> Table:
     sh = p.get("shift_enu_m") or [None] * 3
     rot = p.get("rotation_enu_arcsec") or [None] * 3
     c = p.get("centre") or {}
-    ts = ", ".join(fmt_g(v, 3) for v in (g.get("translation_sigma") or []))
     rows: list[list[str]] = []
     if g.get("kind") != "scale":  # a scale-only fit has no shift or rotation
         rows += [[f"shift {a}", fmt_mm(sh[i]) + " mm"]
@@ -236,9 +235,7 @@ def _precision(p: JSONObject, g: JSONObject) -> Table:
     return _table([("1σ of the georeference", False), ("at the control centroid", True)], rows,
                   caption=f"The fit's uncertainty about the control centroid (lat "
                           f"{fmt_g(c.get('lat'), 9)}°, lon {fmt_g(c.get('lon'), 9)}°), which "
-                          "adds to every measured point's total sigma. The translation's own "
-                          f"sigmas about the Earth's centre ({ts} m) are large only because "
-                          "the translation is correlated with the rotation there.")
+                          "adds to every measured point's total sigma.")
 
 
 def _georef_blocks(status: JSONObject, precision: JSONObject | None) -> list[Block]:
