@@ -1,5 +1,6 @@
 """The layers of gsgeo hold in every import, function-level ones included (docs/architecture.md,
-"Layers"): solve <- crs <- measure <- (export, tiles, store) <- service <- (server, commands).
+"Layers"): solve <- crs <- measure <- (export, georef, report, tiles, store) <- service <-
+(server, commands).
 
 Every module of gsgeo/ and tests/ is read with ast; an import names a module (``import a.b``,
 ``from a import b`` -> a.b when that is a module, else a). Each test lists its offenders.
