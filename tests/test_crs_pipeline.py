@@ -140,7 +140,9 @@ def test_record_has_exactly_the_point_schema_and_to_dict_is_json(truth, rng):
     meas = measure_point(_session_point("P9", o_r, d_r, m), crs="EPSG:27700", exclude=[3])
     rec = meas.record()
     assert tuple(rec) == RECORD_KEYS
-    assert len(RECORD_KEYS) == 32
+    assert len(RECORD_KEYS) == 35
+    # no georeference uncertainty: the total sigmas are the aiming's
+    assert [rec[f"sigma_{a}_meas"] for a in "enh"] == [rec[f"sigma_{a}"] for a in "enh"]
     assert rec["crs"] == "EPSG:27700" and rec["n_rays"] == 3
     assert rec["height_type"] == "ellipsoidal" and "WGS 84" in rec["vertical_datum"]
     assert rec["operation_accuracy_m"] == 2.0 and "OSGB36 to WGS 84" in rec["operation"]

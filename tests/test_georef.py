@@ -274,3 +274,20 @@ def test_scale_only_fixes_the_scale_from_known_distances(small_site):
     new = {q.id: np.array(q.result["point_ecef"]) for q in svc.list_points("s")}
     assert np.linalg.norm(new["G1"] - new["G0"]) == pytest.approx(true_len, rel=1e-9)
     assert read_scene_georef(data / "scenes" / "s").georeferenced is False  # no grid: local
+
+
+def test_a_scene_without_georeference_keeps_full_position_precision(local_site):
+    """Its unit may be many metres: SPZ keeps 18 fractional bits (12 for metric scenes), so
+    each splat sits within 2^-19 units of its input position (whatever georeference the
+    scene has been given since: the root transforms of the history carry it back)."""
+    from gsgeo.tiles.reader import iter_tileset
+
+    scene = local_site["data"] / "scenes" / "site"
+    assert {t.header["fractional_bits"] for t in iter_tileset(scene)} == {18}
+    state = read_scene_georef(scene)
+    back = state.root_of(0) @ np.linalg.inv(state.root_transform)
+    got = read_tileset(scene).positions @ back[:3, :3].T + back[:3, 3]
+    p = local_site["splats"].positions
+    expected = Georeference.from_options().placement(p.min(axis=0), p.max(axis=0)).to_ecef(p)
+    idx = match(expected, got)
+    assert np.linalg.norm(got[idx] - expected, axis=1).max() < 2e-5

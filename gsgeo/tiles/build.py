@@ -42,6 +42,10 @@ BLOCK = 16_384
 PARALLEL_MIN_SPLATS = 200_000
 
 
+#: Fractional bits of SPZ positions for a scene tiled without georeference (at most; fewer
+#: when its extent needs the range): 1/262144 of a unit, e.g. 0.08 mm for a 20 m unit.
+LOCAL_FRACTIONAL_BITS = 18
+
 @dataclass
 class Summary:
     input: str
@@ -465,7 +469,11 @@ def _build(input_path: str | os.PathLike, outdir: str | os.PathLike,
                     arr[:n] = arr[rows]
                 tree = lod.TreeInput(tree.pos[:, :n], tree.radius[:n], tree.key[:n],
                                      tree.perm[:n])
-            frac = spz.fractional_bits_for(extent)
+            # A scene without georeference is in its trainer's unit, which may be many metres
+            # (a normalised COLMAP frame): keep all the precision the 24-bit range allows, so
+            # that a later georeference (which scales the root) does not magnify the steps.
+            most = LOCAL_FRACTIONAL_BITS if georef.kind == "none" else spz.DEFAULT_FRACTIONAL_BITS
+            frac = spz.fractional_bits_for(extent, most)
             if frac < spz.DEFAULT_FRACTIONAL_BITS:
                 georef.warnings.append(
                     f"the scene reaches {extent:.0f} m from its centre: SPZ positions use "

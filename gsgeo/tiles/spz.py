@@ -263,9 +263,10 @@ def compressor(level: int) -> Compressor:
     return zlib.compressobj(level, zlib.DEFLATED, 31)  # 31: gzip container
 
 
-def fractional_bits_for(extent: float) -> int:
-    """Largest number of fractional bits (<= 12) whose 24-bit range holds |coordinates| <= extent."""
-    bits = DEFAULT_FRACTIONAL_BITS
+def fractional_bits_for(extent: float, most: int = DEFAULT_FRACTIONAL_BITS) -> int:
+    """Largest number of fractional bits (<= ``most``) whose 24-bit range holds
+    |coordinates| <= extent."""
+    bits = most
     while bits > 0 and extent >= (2 ** 23 - 1) / 2 ** bits:
         bits -= 1
     return bits
