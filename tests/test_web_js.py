@@ -300,3 +300,39 @@ def test_no_tool_takes_the_georeference_key():
     """G opens the Georeference panel (main.js): no tool may have it as its shortcut."""
     got = run_tools_js("console.log(JSON.stringify(T.TOOLS.map((t) => t.shortcut || '')));")
     assert "G" not in [s.upper() for s in got]
+
+
+def test_reopened_point_rays_come_into_the_current_frame():
+    """web/js/rays.js raysInCurrentFrame: a point's stored rays that the server's solution
+    carries elsewhere (the scene's georeference changed since they were taken) are rebuilt from
+    the carried rays, rendered by the current model matrix; rays already in the current frame,
+    and a point without a solution, keep the stored rays as they are."""
+    sim = _similarity(0.37, [0.2, 0.1, 1.0], 30.0, [100.0, -50.0, 20.0])
+    mm_then = np.eye(4)
+    mm_then[:3, 3] = [0.0, 0.0, 10.0]  # the tileset lifted 10 m when the rays were taken
+    mm_now = np.eye(4)
+    mm_now[:3, 3] = [5.0, 0.0, 0.0]
+    geo = [np.array([6378100.0, 10.0, 20.0]), np.array([6378090.0, -15.0, 25.0])]
+    dirs = [np.array([-0.8, 0.1, -0.2]), np.array([-0.7, 0.3, -0.1])]
+    stored = [{"origin": (mm_then[:3, :3] @ g + mm_then[:3, 3]).tolist(),
+               "direction": (d / np.linalg.norm(d)).tolist(), "ifov": 1e-3, "pixel": [1, 2],
+               "model_matrix": mm_then.T.reshape(-1).tolist()} for g, d in zip(geo, dirs, strict=True)]
+    col = lambda m: m.T.reshape(-1).tolist()  # noqa: E731
+
+    def carried(m: np.ndarray) -> list[dict]:
+        return [{"index": i, "origin_ecef": (m[:3, :3] @ g + m[:3, 3]).tolist(),
+                 "direction_ecef": (m[:3, :3] @ (d / np.linalg.norm(d))).tolist()}
+                for i, (g, d) in enumerate(zip(geo, dirs, strict=True))]
+
+    got = run_module_js("rays.js", """
+console.log(JSON.stringify(data.cases.map((c) => S.raysInCurrentFrame(c.pt, c.mm))));""",
+                        {"cases": [{"pt": {"rays": stored, "result": r}, "mm": col(mm_now)} for r in (
+                            {"rays": carried(sim)}, {"rays": carried(np.eye(4))}, None)]})
+    moved, same, unsolved = got
+    for r, g, d in zip(moved, geo, dirs, strict=True):
+        assert np.allclose(r["origin"], mm_now[:3, :3] @ (sim[:3, :3] @ g + sim[:3, 3]) + mm_now[:3, 3],
+                           rtol=0, atol=1e-6)
+        q = sim[:3, :3] @ d
+        assert np.allclose(r["direction"], q / np.linalg.norm(q))
+        assert r["model_matrix"] == col(mm_now) and r["ifov"] == 1e-3 and r["pixel"] == [1, 2]
+    assert same == stored and unsolved == stored

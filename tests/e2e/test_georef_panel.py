@@ -292,7 +292,29 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
     got = np.array(resp.value.json()["result"]["point_ecef"])
     assert np.linalg.norm(got - target) < 0.01, got - target
 
-    # Undo asks, then restores the old root transform, the banner and the view
+    # a point measured before the change, reopened now (Add rays): its stored rays are carried
+    # into the current frame before a new ray joins them, so it stays at its true place
+    p.click("#points-table tbody tr[data-id='C1']")
+    p.wait_for_selector("#point-detail:not([hidden])")
+    p.click("#point-detail button:text('Add rays')")
+    p.wait_for_function("gsgeo.state.measure && gsgeo.state.measure.rays.length === 4")
+    target = apply(TRUTH, CONTROL["C1"])
+    aim = p.evaluate(AIM_JS, [list(map(float, target)), 200.0, 40.0, 4.0, [0.1, 0.1, 0.0]])
+    p.mouse.click(aim["x"], aim["y"])
+    p.wait_for_function("gsgeo.state.measure.rays.length === 5")
+    with p.expect_response(lambda r: r.url.endswith(f"/projects/{PID}/points/C1")
+                           and r.request.method == "PATCH") as resp:
+        p.keyboard.press("Enter")
+    assert resp.value.status == 200, resp.value.text()
+    c1 = resp.value.json()
+    assert c1["record"]["n_rays"] == 5, c1["record"]
+    got = np.array(c1["result"]["point_ecef"])
+    assert np.linalg.norm(got - target) < 0.05, got - target
+
+    # Undo asks, then restores the old root transform, the banner and the view (the row click
+    # above started a flight to C1: stopped, as an Undo would stop it)
+    p.evaluate("gsgeo.viewer.camera.cancelFlight()")
+    p.evaluate(AIM_JS, [list(map(float, apply(TRUTH, feature))), 30.0, 35.0, 4.0, [0.1, -0.1, 0.0]])
     win_before = window_of(p, apply(TRUTH, feature))
     p.click("#btn-georef-undo")
     p.wait_for_selector("#georef-confirm:not([hidden])")

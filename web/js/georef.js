@@ -178,16 +178,22 @@ export function georefPanel(ctx) {
     $("#georef-confirm").hidden = true;
   }
 
-  function busyMeasuring() {
+  /** Whether a change must wait: a point is being measured (its rays are in the current
+   *  frame), or the viewer shows another scene than the project's (it could not follow). */
+  function mustWait() {
     if (state.measure && state.measure.rays.length) {
       ctx.message("Finish or cancel the point being measured first: its rays are in the current frame.", true);
+      return true;
+    }
+    if (state.project && state.project.scene !== state.sceneName) {
+      ctx.message(`Project ${state.project.name} is on scene '${state.project.scene ?? "none"}': load that scene first.`, true);
       return true;
     }
     return false;
   }
 
   async function askApply() {
-    if (!g.fit || busyMeasuring()) return;
+    if (!g.fit || mustWait()) return;
     const fit = g.fit;
     try {
       const lines = applySummary(fit, ctx.sceneCentre(), await projectsOnScene());
@@ -201,7 +207,7 @@ export function georefPanel(ctx) {
   }
 
   async function askUndo() {
-    if (busyMeasuring() || !g.status) return;
+    if (mustWait() || !g.status) return;
     try {
       const projects = await projectsOnScene();
       const total = projects.reduce((n, p) => n + p.points, 0);

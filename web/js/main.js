@@ -167,6 +167,7 @@ async function loadScene(name, view = null) {
  *  (the view stays on the same feature) and fetch the re-solved points. */
 async function georeferenceChanged(sim16) {
   const cam = viewer.camera;
+  cam.cancelFlight(); // a flight would go on towards its goal in the old frame
   const arr = (c) => [c.x, c.y, c.z];
   const view = moveCamera(sim16, { position: arr(cam.positionWC), direction: arr(cam.directionWC), up: arr(cam.upWC) });
   await loadScenes();

@@ -1,6 +1,8 @@
 // One aim = one ray (README, "Session JSON"): the camera centre and the direction through the
 // clicked pixel in rendered ECEF, the angular size of that pixel, and the tileset's modelMatrix.
 
+import { IDENTITY16, applyDirection, applyPoint, norm } from "./linalg.js";
+
 const Cesium = globalThis.Cesium;
 
 /** The angular size (radians) of one CSS pixel at window position (x, y) of a pinhole camera
@@ -37,4 +39,33 @@ export function captureRay(viewer, windowPosition, modelMatrix) {
     viewport: [width, height],
     model_matrix: modelMatrix,
   };
+}
+
+/** The rays of stored point `pt` in the frame the scene is rendered in now (`modelMatrix`, 16
+ *  numbers column-major), to add rays to it. A point keeps its rays as taken, in the scene's
+ *  frame of that time; the server's solution (pt.result.rays: origin_ecef, direction_ecef)
+ *  carries them into the current one. Where a stored ray and its carried one differ by more
+ *  than `tol` metres (the scene's georeference changed since), every ray is rebuilt from the
+ *  carried one so that the old rays and the new clicks are in one frame; otherwise, and for a
+ *  point without a solution, the stored rays are returned as they are. */
+export function raysInCurrentFrame(pt, modelMatrix, tol = 1e-4) {
+  const stored = pt.rays.map((r) => ({ ...r }));
+  const carried = pt.result && Array.isArray(pt.result.rays) ? pt.result.rays : null;
+  if (!carried || carried.length !== stored.length) return stored;
+  const byIndex = new Map(carried.map((c, i) => [c.index ?? i, c]));
+  const moved = stored.some((r, i) => {
+    const c = byIndex.get(i);
+    if (!c) return false;
+    const rendered = applyPoint(r.model_matrix || IDENTITY16, c.origin_ecef);
+    return norm([0, 1, 2].map((k) => rendered[k] - r.origin[k])) > tol;
+  });
+  if (!moved) return stored;
+  return stored.map((r, i) => {
+    const c = byIndex.get(i);
+    if (!c) return r;
+    const d = applyDirection(modelMatrix, c.direction_ecef);
+    const n = norm(d);
+    return { ...r, origin: applyPoint(modelMatrix, c.origin_ecef), direction: d.map((x) => x / n),
+      model_matrix: modelMatrix.slice() };
+  });
 }

@@ -9,7 +9,7 @@ import { api } from "../api.js";
 import { COLORS, cart } from "../draw.js";
 import { $, fixed, h, mm } from "../format.js";
 import { applyPoint, norm, sub } from "../linalg.js";
-import { captureRay } from "../rays.js";
+import { captureRay, raysInCurrentFrame } from "../rays.js";
 
 const Cesium = window.Cesium;
 
@@ -165,7 +165,8 @@ const measure = {
   start(ctx, editPoint = null) {
     const { state } = ctx;
     state.measure = {
-      rays: editPoint ? editPoint.rays.map((r) => ({ ...r })) : [],
+      // a reopened point's rays in the scene's current frame (its georeference may have changed)
+      rays: editPoint ? raysInCurrentFrame(editPoint, ctx.modelMatrix()) : [],
       excluded: new Set(editPoint ? editPoint.excluded : []),
       editing: editPoint ? editPoint.id : null,
       pointId: editPoint ? editPoint.id : nextPointId(state.points),
