@@ -296,6 +296,21 @@ def test_apply_confirmation_says_what_changes():
     assert "Re-solved: 15 points in 2 projects on this scene (a: 12, b: 3)" in text
 
 
+def test_a_fit_that_changes_nothing_is_recognised():
+    """After an Apply the fit in the new frame is the identity up to rounding: recognised (Apply
+    is off); 0.01 ppm of scale, 1e-5 degrees of rotation or a 1 mm shift of the centre are not."""
+    centre = [3.9e6, -8.3e3, 4.97e6]
+    eye = np.eye(4)
+    cases = [eye, _similarity(1 + 1e-12, [0, 0, 1], 1e-9, [1e-6, 0, 0]),
+             _similarity(1 + 1e-8, [0, 0, 1], 0.0, [0, 0, 0]),
+             _similarity(1.0, [1, 0, 0], 1e-5, [0, 0, 0]),
+             _similarity(1.0, [1, 0, 0], 0.0, [0.001, 0, 0])]
+    got = run_module_js("similarity.js", "console.log(JSON.stringify(data.ms.map((m) => "
+                        "S.changesNothing(m, data.c))));",
+                        {"ms": [m.T.reshape(-1).tolist() for m in cases], "c": centre})
+    assert got == [True, True, False, False, False]
+
+
 def test_no_tool_takes_the_georeference_key():
     """G opens the Georeference panel (main.js): no tool may have it as its shortcut."""
     got = run_tools_js("console.log(JSON.stringify(T.TOOLS.map((t) => t.shortcut || '')));")

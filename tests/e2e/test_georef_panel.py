@@ -272,6 +272,9 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
     k1 = np.array(p.evaluate("gsgeo.state.points.find(q => q.id === 'K1').result.point_ecef"))
     assert np.linalg.norm(k1 - apply(TRUTH, CHECK["K1"])) < 0.05
     assert p.locator("#btn-georef-undo").is_enabled()
+    # fitted again in the new frame, the fit changes nothing: Apply is off and says why
+    p.wait_for_selector("#georef-current")
+    assert p.locator("#btn-georef-apply").is_disabled()
     shot(p, "03_applied")
 
     # a point measured now carries the new georeference version and lands at its true place

@@ -9,7 +9,7 @@
 
 import { api, download } from "./api.js";
 import { $, fixed, h, mm } from "./format.js";
-import { applySummary, decompose, notGeoreferenced } from "./similarity.js";
+import { applySummary, changesNothing, decompose, notGeoreferenced } from "./similarity.js";
 
 export const MIN_MEASURED = 3;
 
@@ -66,6 +66,11 @@ export function georefPanel(ctx) {
   function toggleExclude(id) {
     if (g.exclude.has(id)) g.exclude.delete(id); else g.exclude.add(id);
     refresh();
+  }
+
+  /** Whether the fit is the scene's georeference already (fitted again after an Apply). */
+  function current() {
+    return Boolean(g.fit && g.fit.matrix && changesNothing(g.fit.matrix, ctx.sceneCentre()));
   }
 
   function residualRow(c, r) {
@@ -138,6 +143,9 @@ export function georefPanel(ctx) {
           + (wo && wo.rmse_control ? ` Without: RMSE 3D ${mm(wo.rmse_control["3d"])} mm, scale × ${fixed(wo.scale, 6)}.` : "")));
       }
       for (const w of g.fit.warnings || []) box.append(h("div", { class: "warn" }, `⚠ ${w}`));
+      if (current()) {
+        box.append(h("p", { class: "note", id: "georef-current" }, "The scene already has this georeference: nothing to apply."));
+      }
     } else if (g.error && st) {
       box.textContent = g.error;
       box.classList.add("error");
@@ -147,7 +155,7 @@ export function georefPanel(ctx) {
       box.textContent = `${n} of ${control.length} control points measured; the fit needs ${MIN_MEASURED} (not excluded).`;
     }
     const cur = st ? (st.history || []).find((e) => e.version === st.version) : null;
-    $("#btn-georef-apply").disabled = !g.fit;
+    $("#btn-georef-apply").disabled = !g.fit || current();
     $("#btn-georef-undo").disabled = !(cur && cur.parent !== null && cur.parent !== undefined);
     $("#btn-georef-report").disabled = !state.project;
   }

@@ -59,6 +59,16 @@ export function notGeoreferenced(info) {
   return Boolean(o) && Math.abs(o.lat) < 1e-6 && Math.abs(o.lon) < 1e-6;
 }
 
+/** Whether similarity `m16` leaves the scene where it is: scale within 0.001 ppm of 1, rotation
+ *  under 1e-6 degrees, and `centre` (ECEF; the origin when null) moved less than 0.1 mm (a
+ *  fit of a scene that already has its result). */
+export function changesNothing(m16, centre) {
+  const d = decompose(m16);
+  const c = centre || [0, 0, 0];
+  const moved = applySimilarity(m16, c);
+  return Math.abs(d.ppm) < 1e-3 && d.angleDeg < 1e-6 && Math.hypot(...moved.map((x, i) => x - c[i])) < 1e-4;
+}
+
 /** The lines of the confirmation of an Apply: what will change. `fit` is the preview's
  *  GeorefResult, `centre` the scene's centre (ECEF) or null, `projects` [{name, points}] of
  *  every project on the scene. */
