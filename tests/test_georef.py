@@ -226,6 +226,12 @@ def test_rays_taken_under_an_old_georeference_are_carried_into_the_new_one(small
     p_stale = np.array(stale.result["point_ecef"])
     assert np.linalg.norm(p_stale - after["G0"]) < 0.05  # lands on the feature
     assert np.linalg.norm(np.array(fresh.result["point_ecef"]) - p_stale) > 1.0  # not mapped
+    # replacing a point's rays with rays from the old frame (PATCH) maps them as well
+    patched = svc.update_point("s", "late2", {"rays": old_rays, "georef_version": 0})
+    assert np.linalg.norm(np.array(patched.result["point_ecef"]) - p_stale) < 1e-6
+    assert patched.frame is not None and patched.frame["version"] == 0
+    with pytest.raises(InputError, match="give rays with it"):
+        svc.update_point("s", "late2", {"georef_version": 0})
     with pytest.raises(InputError, match="no georeference version 7"):
         svc.add_point("s", {"id": "bad", "rays": old_rays, "georef_version": 7})
     # undo: the scene's previous root, and every point exactly where it was

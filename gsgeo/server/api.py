@@ -89,7 +89,7 @@ def point_json(pt: PointRecord) -> dict[str, Any]:
     return {"id": pt.id, "code": pt.code, "description": pt.description, "rays": pt.rays,
             "excluded": pt.excluded, "status": "solved" if pt.result is not None else "failed",
             "error": pt.error, "record": pt.record, "result": pt.result,
-            "created_at": pt.created_at, "updated_at": pt.updated_at}
+            "frame": pt.frame, "created_at": pt.created_at, "updated_at": pt.updated_at}
 
 
 def feature_json(f: FeatureRecord, measures: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -135,6 +135,9 @@ class PointPatch(BaseModel):
     exclude_ray: RayIndex | None = Field(None, description="exclude one more ray (0-based)")
     restore_ray: RayIndex | None = Field(None, description="bring an excluded ray back")
     rays: Rays | None = Field(None, description="replace all rays (clears exclusions)")
+    georef_version: Annotated[int, Field(ge=0, le=1_000_000)] | None = Field(
+        None, description="with rays: the scene georeference version they were taken under "
+                          "(the current one when absent)")
 
 
 PointIds = Annotated[list[ItemId], Field(min_length=2, max_length=10000)]

@@ -51,7 +51,7 @@ from gsgeo.service.measuring import (
     stored_rays,
     with_record,
 )
-from gsgeo.service.points import PointInput, check_ray_count, point_input, rays_input
+from gsgeo.service.points import PointInput, check_ray_count, georef_version, point_input, rays_input
 from gsgeo.service.validate import item_id, sigma_px, slug
 from gsgeo.solve.linalg import FloatArray
 from gsgeo.store.base import Store, Transaction
@@ -368,14 +368,19 @@ class Projects:
         """Rename (id), recode (code, description), exclude or restore rays, or replace rays.
 
         changes keys: id, code, description, excluded (full list of 0-based indices),
-        exclude_ray, restore_ray (one index), rays (replaces all rays; clears exclusions).
+        exclude_ray, restore_ray (one index), rays (replaces all rays; clears exclusions; with
+        georef_version, the scene georeference they were taken under, else the current).
         Changing rays or exclusions re-measures; a change that leaves the point unsolvable is
         refused and nothing is written.
         """
-        allowed = {"id", "code", "description", "excluded", "exclude_ray", "restore_ray", "rays"}
+        allowed = {"id", "code", "description", "excluded", "exclude_ray", "restore_ray", "rays",
+                   "georef_version"}
         unknown = set(changes) - allowed
         if unknown:
             raise InputError("not a point field that can be changed", field=sorted(unknown)[0])
+        if changes.get("georef_version") is not None and changes.get("rays") is None:
+            raise InputError("applies to new rays only: give rays with it",
+                             field="georef_version")
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
             pt = self._point(tx, pid, point_id)
@@ -384,7 +389,8 @@ class Projects:
             if changes.get("rays") is not None:
                 typed = rays_input(changes["rays"])
                 pt.rays = typed.to_json()
-                pt.frame = frame_record(scene_frame(self.data_dir, p.scene))
+                pt.frame = frame_record(scene_frame(self.data_dir, p.scene),
+                                        georef_version(changes.get("georef_version")))
                 pt.excluded = []
                 remeasure = True
             excluded = set(pt.excluded)
