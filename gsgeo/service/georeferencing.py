@@ -90,15 +90,22 @@ def frame_record(ctx: SceneFrame | None, version: int | None = None) -> JSONObje
     return {"version": v, "root_transform": column_major(root)}
 
 
+def carry(frame: JSONObject | None, ctx: SceneFrame | None) -> FloatArray | None:
+    """The similarity (4, 4) from the frame a point's rays were taken under into the scene's
+    current one; None when they agree or either is unknown."""
+    if ctx is None or frame is None:
+        return None
+    then = matrix4(frame.get("root_transform"))  # type: ignore[arg-type]
+    if np.array_equal(then, ctx.root):
+        return None
+    return ctx.root @ np.linalg.inv(then)
+
+
 def rays_now(rays: Rays, frame: JSONObject | None, ctx: SceneFrame | None) -> Rays:
     """A point's rays carried from the frame they were taken under into the scene's current
     one (unchanged when the frames agree or either is unknown)."""
-    if ctx is None or frame is None:
-        return rays
-    then = matrix4(frame.get("root_transform"))  # type: ignore[arg-type]
-    if np.array_equal(then, ctx.root):
-        return rays
-    return rays.mapped(ctx.root @ np.linalg.inv(then))
+    m = carry(frame, ctx)
+    return rays if m is None else rays.mapped(m)
 
 
 def measured_from(points: Sequence[PointRecord]) -> Measured:

@@ -33,6 +33,7 @@ from gsgeo.measure.rays import SolveSettings
 from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
 from gsgeo.service.georeferencing import (
     SceneFrame,
+    carry,
     frame_record,
     measured_from,
     rays_now,
@@ -255,10 +256,16 @@ class Projects:
         at once (gsgeo.measure.batch: vectorised, point by point the result _measure_into
         gives); a point that fails keeps the reason."""
         typed: list[tuple[PointRecord, Rays]] = []
+        carries: dict[tuple[float, ...], FloatArray | None] = {}  # one per distinct frame
         for pt in pts:
             pt.solved_rev = p.settings_rev
             try:
-                typed.append((pt, rays_now(stored_rays(pt.rays), pt.frame, ctx)))
+                rays = stored_rays(pt.rays)
+                root = () if pt.frame is None else tuple(pt.frame.get("root_transform") or ())
+                if root not in carries:
+                    carries[root] = carry(pt.frame, ctx)
+                m = carries[root]
+                typed.append((pt, rays if m is None else rays.mapped(m)))
             except GsgeoError as exc:
                 pt.result = pt.record = None
                 pt.error = str(exc)
@@ -274,14 +281,16 @@ class Projects:
                 pt.result = pt.record = None
                 pt.error = str(exc)
             return
-        for (pt, _), m in zip(typed, results, strict=True):
-            if isinstance(m, Measurement):
-                pt.result = measured_result(m)
-                pt.record = with_record(pt.result)
+        for (pt, _), res in zip(typed, results, strict=True):
+            if isinstance(res, Measurement):
+                # stored as is: the store writes non-finite numbers as null; the point-schema
+                # record is derived when the point is read again
+                pt.result = res.to_dict()
+                pt.record = None
                 pt.error = None
             else:
                 pt.result = pt.record = None
-                pt.error = m.error
+                pt.error = res.error
 
     def delete_project(self, pid: str) -> None:
         with self.store.transaction() as tx:

@@ -45,10 +45,11 @@ def now_iso() -> str:
 
 def _dumps(value: JSON) -> str:
     """Compact JSON text (orjson: a point's result is written and read on every re-measure).
-    Values arrive JSON-ready (gsgeo.service.measuring.json_ready: no NaN); integers beyond
-    64 bits, which orjson refuses, go through the standard library."""
+    Non-finite numbers are written as null (JSON has no NaN; a re-measured result arrives as
+    Measurement.to_dict() gives it), numpy values as numbers; integers beyond 64 bits, which
+    orjson refuses, go through the standard library."""
     try:
-        return orjson.dumps(value).decode()
+        return orjson.dumps(value, option=orjson.OPT_SERIALIZE_NUMPY).decode()
     except orjson.JSONEncodeError:  # e.g. integers beyond 64 bits: the standard library's
         return json.dumps(value, separators=(",", ":"), allow_nan=False)
 
