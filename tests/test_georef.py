@@ -297,3 +297,17 @@ def test_a_scene_without_georeference_keeps_full_position_precision(local_site):
     expected = Georeference.from_options().placement(p.min(axis=0), p.max(axis=0)).to_ecef(p)
     idx = match(expected, got)
     assert np.linalg.norm(got[idx] - expected, axis=1).max() < 2e-5
+
+
+def test_moving_a_project_to_another_scene_forgets_its_frames(small_site):
+    svc, data, *_ = small_site
+    before = {q.id: np.array(q.result["point_ecef"]) for q in svc.list_points("s")}
+    svc.georeference("s", apply=True)
+    (data / "scenes" / "t").mkdir()
+    (data / "scenes" / "t" / "tileset.json").write_bytes(
+        (data / "scenes" / "s" / "tileset.json").read_bytes().replace(b'"georef"', b'"x"'))
+    svc.update_project("s", {"scene": "t"})  # its rays as taken, no carry from scene s
+    moved = {q.id: q for q in svc.list_points("s")}
+    for pid, p in before.items():
+        assert moved[pid].frame is None
+        assert np.linalg.norm(np.array(moved[pid].result["point_ecef"]) - p) < 1e-6

@@ -219,8 +219,19 @@ class Projects:
                 p.name = name
             if "description" in changes:
                 p.description = _text(changes["description"], "description")
+            moved = False
             if "scene" in changes:
-                p.scene = None if changes["scene"] is None else self._check_scene(changes["scene"])
+                scene = None if changes["scene"] is None else self._check_scene(changes["scene"])
+                moved, p.scene = scene != p.scene, scene
+            if moved:
+                # frames of another scene mean nothing here: the rays are taken as given in
+                # the new scene's current frame, with its georeference's uncertainty
+                pts = tx.list_points(p.id, results=False)
+                for pt in pts:
+                    pt.frame = None
+                self._measure_many(pts, p, scene_frame(self.data_dir, p.scene))
+                for pt in pts:
+                    tx.update_point(pt)
             if any(k in changes for k in SETTINGS):
                 new = p.settings() | {k: changes[k] for k in SETTINGS if k in changes}
                 if new.get("sigma_px") is None:
