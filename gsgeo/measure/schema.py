@@ -99,21 +99,21 @@ class Measurement:
     def to_dict(self) -> JSONObject:
         """record() plus rays, warnings, 95 % ellipsoid axes and the ENU solution (JSON-ready)."""
         out = self.record()
-        rays = []
-        for i in range(self.excluded.shape[0]):
-            rays.append({
-                "index": i,
-                "origin_ecef": self.ray_origins_ecef[i].tolist(),
-                "direction_ecef": self.ray_directions_ecef[i].tolist(),
-                "origin_grid": (None if self.ray_origins_grid is None
-                                else self.ray_origins_grid[i].tolist()),
-                "ifov": None if self.ifov is None else float(self.ifov[i]),
-                "residual_px": (None if self.residuals_px is None
-                                else float(self.residuals_px[i])),
-                "residual_m": None if self.residuals_m is None else float(self.residuals_m[i]),
-                "outlier": bool(self.outliers[i]) if self.outliers is not None else False,
-                "excluded": bool(self.excluded[i]),
-            })
+        n = int(self.excluded.shape[0])
+        none: list[None] = [None] * n
+
+        def col(a: np.ndarray | None) -> list:  # one tolist() per array, not per ray
+            return none if a is None else a.tolist()
+
+        rays = [{"index": i, "origin_ecef": o, "direction_ecef": d, "origin_grid": g,
+                 "ifov": f, "residual_px": rp, "residual_m": rm, "outlier": bool(ol),
+                 "excluded": bool(ex)}
+                for i, (o, d, g, f, rp, rm, ol, ex) in enumerate(zip(
+                    col(self.ray_origins_ecef), col(self.ray_directions_ecef),
+                    col(self.ray_origins_grid), col(self.ifov), col(self.residuals_px),
+                    col(self.residuals_m),
+                    col(self.outliers) if self.outliers is not None else [False] * n,
+                    col(self.excluded), strict=True))]
         out["rays"] = rays
         out["warnings"] = list(self.warnings)
         out["source_crs"] = self.source_crs
