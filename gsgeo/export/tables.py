@@ -41,6 +41,23 @@ POINT_TYPES.update(dict.fromkeys(
      "measured_at"), "str"))
 POINT_TYPES["n_rays"] = "int"
 
+#: Column types of the other layers (GeoPackage rays, lines, polygons, error_ellipses,
+#: check_points), in column order; the OGC API's collections announce the same.
+RAY_TYPES: dict[str, str] = {"point_id": "str", "ray_index": "int", "residual_px": "float",
+                             "residual_m": "float", "outlier": "bool", "excluded": "bool"}
+LINE_TYPES: dict[str, str] = {"line_id": "str", "point_ids": "str", "n_points": "int",
+                              "length_3d": "float", "sigma_length_3d": "float",
+                              "length_2d": "float", "sigma_length_2d": "float"}
+POLYGON_TYPES: dict[str, str] = {"polygon_id": "str", "point_ids": "str", "n_points": "int",
+                                 "area_2d": "float", "sigma_area_2d": "float",
+                                 "perimeter_2d": "float", "sigma_perimeter_2d": "float"}
+ELLIPSE_TYPES: dict[str, str] = {"point_id": "str", "ellipse_major_95": "float",
+                                 "ellipse_minor_95": "float", "ellipse_bearing_deg": "float"}
+CHECK_POINT_TYPES: dict[str, str] = {"point_id": "str", "easting": "float", "northing": "float",
+                                     "height": "float", "measured": "bool",
+                                     "d_easting": "float", "d_northing": "float",
+                                     "d_height": "float"}
+
 #: Vertices of an error-ellipse polygon (closed ring: one more).
 ELLIPSE_VERTICES = 36
 
@@ -362,8 +379,7 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
             "ellipse_major_95": cols["ellipse_major_95"][sel],
             "ellipse_minor_95": cols["ellipse_minor_95"][sel],
             "ellipse_bearing_deg": cols["ellipse_bearing_deg"][sel],
-        }, {"point_id": "str", "ellipse_major_95": "float", "ellipse_minor_95": "float",
-            "ellipse_bearing_deg": "float"})
+        }, dict(ELLIPSE_TYPES))
         data.ellipse_xy = ellipse_rings(xyz[sel, 0], xyz[sel, 1], cols["ellipse_major_95"][sel],
                                         cols["ellipse_minor_95"][sel],
                                         np.nan_to_num(cols["ellipse_bearing_deg"][sel]),
@@ -456,8 +472,7 @@ def _collect_rays(data: ExportData, solved: list, xyz: np.ndarray, ids: list[str
         "residual_m": np.concatenate([np.asarray(r[2], dtype=float) for _, r in parts]),
         "outlier": np.concatenate([np.asarray(r[3], dtype=bool) for _, r in parts]),
         "excluded": np.concatenate([np.asarray(r[4], dtype=bool) for _, r in parts]),
-    }, {"point_id": "str", "ray_index": "int", "residual_px": "float", "residual_m": "float",
-        "outlier": "bool", "excluded": "bool"})
+    }, dict(RAY_TYPES))
 
 
 def _ids_text(pids: Sequence[str]) -> str:
@@ -532,8 +547,7 @@ def _collect_features(data: ExportData, lines: Iterable[Any], polygons: Iterable
             "sigma_length_3d": m.sigma_length_3d,
             "length_2d": m.length_2d,
             "sigma_length_2d": m.sigma_length_2d,
-        }, {"line_id": "str", "point_ids": "str", "n_points": "int", "length_3d": "float",
-            "sigma_length_3d": "float", "length_2d": "float", "sigma_length_2d": "float"})
+        }, dict(LINE_TYPES))
     if err is not None:
         raise err
     rows, err = _parse_features(polygons, "polygon", index, failed)
@@ -549,8 +563,7 @@ def _collect_features(data: ExportData, lines: Iterable[Any], polygons: Iterable
             "sigma_area_2d": m.sigma_area_2d,
             "perimeter_2d": m.perimeter_2d,
             "sigma_perimeter_2d": m.sigma_perimeter_2d,
-        }, {"polygon_id": "str", "point_ids": "str", "n_points": "int", "area_2d": "float",
-            "sigma_area_2d": "float", "perimeter_2d": "float", "sigma_perimeter_2d": "float"})
+        }, dict(POLYGON_TYPES))
     if err is not None:
         raise err
 
@@ -592,5 +605,4 @@ def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: 
         "easting": cxyz[:, 0], "northing": cxyz[:, 1], "height": cxyz[:, 2],
         "measured": has,
         "d_easting": d[:, 0], "d_northing": d[:, 1], "d_height": d[:, 2],
-    }, {"point_id": "str", "easting": "float", "northing": "float", "height": "float",
-        "measured": "bool", "d_easting": "float", "d_northing": "float", "d_height": "float"})
+    }, dict(CHECK_POINT_TYPES))

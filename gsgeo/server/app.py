@@ -190,6 +190,9 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     from gsgeo.server.report import router as report_router
 
     app.include_router(report_router)
+    from gsgeo.server.ogc import router as ogc_router
+
+    app.include_router(ogc_router)
 
     scene_folders = SceneFolders(config.data_dir)
     # ServerConfig.__post_init__ always sets both folders.

@@ -3,14 +3,14 @@
 - Request bodies over the limit get 413 (checked on Content-Length and while streaming). The
   limit is the one of the route the request reaches (``body_limit``, see
   gsgeo.server.routing), so no path spelling earns a larger one.
-- When a token is configured, every /api request must carry it
+- When a token is configured, every /api and /ogc request must carry it
   (``Authorization: Bearer TOKEN`` or ``X-Gsgeo-Token: TOKEN``), and so must every /scenes
   request, where the cookie ``gsgeo-token[-PORT]=TOKEN`` also counts (the viewer sets it
   from ``#token=`` so that Cesium's own tile requests carry it); otherwise 401. The API
   takes no cookie: a browser sends cookies by itself, headers only when a script adds them,
   so no page of another site can make a request count as the user's.
 - The Host header must be one the server answers to (defeats DNS rebinding on loopback).
-- An /api request from a browser page of another origin (``Origin`` header not matching the
+- An /api or /ogc request from a browser page of another origin (``Origin`` header not matching the
   Host) gets 403: CORS is closed, and this also stops cross-site form posts.
 """
 
@@ -25,6 +25,9 @@ from starlette.requests import cookie_parser
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 MiB = 1024 * 1024
+
+#: Paths guarded as the API: token off loopback, closed CORS (the JSON API and the OGC API).
+GUARDED = ("/api", "/ogc")
 
 #: Name (or name prefix, ``gsgeo-token-PORT``) of the cookie that carries the token to /scenes.
 TOKEN_COOKIE = "gsgeo-token"
@@ -98,7 +101,7 @@ class Guard:
         if self.allowed_hosts is not None and _host_name(host) not in self.allowed_hosts:
             await _send_json(send, 400, f"Host header '{host[:80]}' is not served here", "Host")
             return
-        is_api = path == "/api" or path.startswith("/api/")
+        is_api = any(path == p or path.startswith(p + "/") for p in GUARDED)
         if is_api:
             origin = headers.get("origin")
             if origin is not None and origin != "null":

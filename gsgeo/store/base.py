@@ -10,8 +10,61 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from contextlib import AbstractContextManager
+from dataclasses import dataclass
+from datetime import datetime
 
+from gsgeo.jsontypes import JSONObject
 from gsgeo.store.records import CheckPointRecord, FeatureRecord, PointRecord, Project
+
+
+@dataclass(frozen=True)
+class PointFilter:
+    """Which solved points a page of records holds (every given condition must hold).
+
+    ``code``: equal to it. ``measured_from`` / ``measured_to``: the record's ``measured_at``
+    (UTC) within these instants, both inclusive (timezone-aware datetimes). ``box``: (x key,
+    y key, min x, min y, max x, max y) over two record keys, e.g. ("lon", "lat", ...) in
+    degrees or ("easting", "northing", ...) in the grid's units; min x > max x wraps around
+    (a box over the antimeridian).
+    """
+
+    code: str | None = None
+    measured_from: datetime | None = None
+    measured_to: datetime | None = None
+    box: tuple[str, str, float, float, float, float] | None = None
+
+    def matches(self, record: JSONObject) -> bool:
+        """Whether a point-schema record passes (the reference the backends' queries follow)."""
+        if self.code is not None and record.get("code") != self.code:
+            return False
+        if self.measured_from is not None or self.measured_to is not None:
+            try:
+                t = datetime.fromisoformat(str(record.get("measured_at")))
+            except ValueError:
+                return False
+            if t.tzinfo is None:
+                return False
+            if (self.measured_from is not None and t < self.measured_from) or \
+                    (self.measured_to is not None and t > self.measured_to):
+                return False
+        if self.box is not None:
+            kx, ky, x0, y0, x1, y1 = self.box
+            x, y = record.get(kx), record.get(ky)
+            if not isinstance(x, (int, float)) or not isinstance(y, (int, float)):
+                return False
+            inside_x = x0 <= x <= x1 if x0 <= x1 else (x >= x0 or x <= x1)
+            if not (inside_x and y0 <= y <= y1):
+                return False
+        return True
+
+
+@dataclass(frozen=True)
+class PointRow:
+    """A solved point as a page of records gives it: id, point-schema record, last change."""
+
+    id: str
+    record: JSONObject
+    updated_at: str
 
 
 class Transaction(ABC):
@@ -45,6 +98,24 @@ class Transaction(ABC):
         """Write ``point``; ``old_id`` is its previous id when it is being renamed."""
     @abstractmethod
     def delete_point(self, pid: str, point_id: str) -> bool: ...
+
+    def count_point_records(self, pid: str, where: PointFilter | None = None) -> int:
+        """How many solved points (those with a result) of the project pass ``where``.
+
+        This default reads every point; a backend answers it from an index instead."""
+        f = where or PointFilter()
+        return sum(1 for p in self.list_points(pid) if p.record is not None and f.matches(p.record))
+
+    def page_point_records(self, pid: str, where: PointFilter | None = None, offset: int = 0,
+                           limit: int | None = None) -> list[PointRow]:
+        """One page of the solved points passing ``where``, in creation order: ``offset``
+        rows skipped, at most ``limit`` (None: all) returned, each with its record only
+        (not the whole stored result). This default reads every point; a backend reads only
+        the page."""
+        f = where or PointFilter()
+        rows = [PointRow(p.id, p.record, p.updated_at) for p in self.list_points(pid)
+                if p.record is not None and f.matches(p.record)]
+        return rows[offset:] if limit is None else rows[offset:offset + limit]
 
     # lines and polygons
     @abstractmethod

@@ -13,14 +13,15 @@ import sqlite3
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import orjson
 
 from gsgeo.errors import GsgeoError
 from gsgeo.jsontypes import JSON
-from gsgeo.store.base import Store, Transaction
+from gsgeo.pointschema import RECORD_KEYS
+from gsgeo.store.base import PointFilter, PointRow, Store, Transaction
 from gsgeo.store.migrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.records import (
     CheckPointRecord,
@@ -56,6 +57,51 @@ def _dumps(value: JSON) -> str:
 
 def _loads(text: str | None) -> JSON:
     return None if text is None else orjson.loads(text)
+
+
+#: One json_extract call gives a point's record as a JSON array, in RECORD_KEYS order: the
+#: stored result is parsed once, in C, and the rest of it (rays, covariances) never reaches Python.
+RECORD_SQL = "json_extract(result, " + ", ".join(f"'$.{k}'" for k in RECORD_KEYS) + ")"
+
+
+def _instant(t: datetime, up: bool) -> str:
+    """A bound for SQLite's julianday(): UTC to the millisecond (SQLite reads no finer),
+    rounded up (``up``) or down so that an inclusive bound includes nothing beyond it."""
+    u = t.astimezone(UTC)
+    rest = u.microsecond % 1000
+    u -= timedelta(microseconds=rest)
+    if up and rest:
+        u += timedelta(milliseconds=1)
+    return u.strftime("%Y-%m-%dT%H:%M:%S.") + f"{u.microsecond // 1000:03d}Z"
+
+
+def _point_where(pid: str, where: PointFilter | None) -> tuple[str, list[object]]:
+    """The WHERE clause (and its arguments) of the solved points of ``pid`` passing ``where``
+    (PointFilter.matches, as SQL)."""
+    sql = "project_id = ? AND result IS NOT NULL"
+    args: list[object] = [pid]
+    if where is None:
+        return sql, args
+    if where.code is not None:
+        sql += " AND code = ?"  # the column is kept equal to the result's code
+        args.append(where.code)
+    when = "julianday(json_extract(result, '$.measured_at'))"
+    if where.measured_from is not None:
+        sql += f" AND {when} >= julianday(?)"
+        args.append(_instant(where.measured_from, up=True))
+    if where.measured_to is not None:
+        sql += f" AND {when} <= julianday(?)"
+        args.append(_instant(where.measured_to, up=False))
+    if where.box is not None:
+        kx, ky, x0, y0, x1, y1 = where.box
+        if kx not in RECORD_KEYS or ky not in RECORD_KEYS:
+            raise ValueError(f"not point-schema keys: {kx}, {ky}")
+        x, y = f"json_extract(result, '$.{kx}')", f"json_extract(result, '$.{ky}')"
+        sql += f" AND {y} BETWEEN ? AND ?"
+        args += [y0, y1]
+        sql += f" AND {x} BETWEEN ? AND ?" if x0 <= x1 else f" AND ({x} >= ? OR {x} <= ?)"
+        args += [x0, x1]
+    return sql, args
 
 
 class SQLiteTransaction(Transaction):
@@ -135,6 +181,20 @@ class SQLiteTransaction(Transaction):
                                     "frame")
         rows = self._all(f"SELECT {cols} FROM points WHERE project_id = ? ORDER BY seq", (pid,))
         return [self._point(r) for r in rows]
+
+    def count_point_records(self, pid: str, where: PointFilter | None = None) -> int:
+        sql, args = _point_where(pid, where)
+        return int(self.con.execute(f"SELECT COUNT(*) FROM points WHERE {sql}", args).fetchone()[0])
+
+    def page_point_records(self, pid: str, where: PointFilter | None = None, offset: int = 0,
+                           limit: int | None = None) -> list[PointRow]:
+        sql, args = _point_where(pid, where)
+        rows = self.con.execute(
+            f"SELECT id, updated_at, {RECORD_SQL} FROM points WHERE {sql} ORDER BY seq"
+            " LIMIT ? OFFSET ?", [*args, -1 if limit is None else limit, offset]).fetchall()
+        keys = RECORD_KEYS
+        return [PointRow(r[0], dict(zip(keys, orjson.loads(r[2]), strict=True)), r[1])
+                for r in rows]
 
     def get_point(self, pid: str, point_id: str) -> PointRecord | None:
         row = self._one("SELECT * FROM points WHERE project_id = ? AND id = ?", (pid, point_id))
