@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 import secrets
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -657,44 +657,47 @@ class Projects:
                 _, report = self._georef_solution(tx, p, scene_frame(self.data_dir, p.scene),
                                                   exclude, distances)
             return json_ready(report)
-        written: tuple[Path, bytes] | None = None
-        try:
-            with self.store.transaction() as tx:
-                p = self._project(tx, pid)
-                path = scene_path(self.data_dir, p.scene)
-                ctx = scene_frame(self.data_dir, p.scene)
-                if path is None or ctx is None:
-                    raise InputError(f"project '{pid}' has no scene to apply a georeference to",
-                                     field="apply")
-                sol, report = self._georef_solution(tx, p, ctx, exclude, distances)
-                if report["outliers"] and not accept_outliers:
-                    raise InputError(
-                        f"control point(s) {', '.join(report['outliers'])} fail the blunder "
-                        "test; exclude them, or accept them explicitly (accept_outliers)",
-                        field="accept_outliers")
-                summary = dict(report) | {"exclude": list(exclude)}
-                before = path.read_bytes()
-                state = apply_similarity(path, sol.similarity.matrix(), kind=report["kind"],
-                                         frame_covariance=sol.frame.to_json(),
-                                         summary=json_ready(summary),
-                                         georeferenced=report["kind"] != "scale"
-                                         or ctx.state.georeferenced,
-                                         expect_version=ctx.version)
-                written = (path, before)
-                n = self._remeasure_scene(tx, p.scene, ctx)
-                report = dict(report) | {
-                    "applied": True, "remeasured_points": n,
-                    "scene": {"name": p.scene, "version": state.version,
-                              "root_transform": column_major(state.root_transform),
-                              "similarity": column_major(sol.similarity.matrix())}}
-        except BaseException as exc:
-            if written is not None:
-                restore_on_failure(*written, exc)
-            raise
-        return json_ready(report)
+
+        def fit_and_write(tx: Transaction, p: Project, path: Path,
+                          ctx: SceneFrame) -> JSONObject:
+            sol, report = self._georef_solution(tx, p, ctx, exclude, distances)
+            if report["outliers"] and not accept_outliers:
+                raise InputError(
+                    f"control point(s) {', '.join(report['outliers'])} fail the blunder "
+                    "test; exclude them, or accept them explicitly (accept_outliers)",
+                    field="accept_outliers")
+            summary = dict(report) | {"exclude": list(exclude)}
+            state = apply_similarity(path, sol.similarity.matrix(), kind=report["kind"],
+                                     frame_covariance=sol.frame.to_json(),
+                                     summary=json_ready(summary),
+                                     georeferenced=report["kind"] != "scale"
+                                     or ctx.state.georeferenced,
+                                     expect_version=ctx.version)
+            return dict(report) | {
+                "applied": True,
+                "scene": {"name": p.scene, "version": state.version,
+                          "root_transform": column_major(state.root_transform),
+                          "similarity": column_major(sol.similarity.matrix())}}
+
+        report, n = self._change_scene(pid, fit_and_write)
+        return json_ready(report | {"remeasured_points": n})
 
     def undo_georeference(self, pid: str) -> JSONObject:
         """Restore the scene's previous georeference and re-measure every project on it."""
+        def restore(_tx: Transaction, _p: Project, path: Path, _ctx: SceneFrame) -> JSONObject:
+            state, sim = undo_scene(path)
+            return {"version": state.version, "georeferenced": state.georeferenced,
+                    "root_transform": column_major(state.root_transform),
+                    "similarity": column_major(sim)}
+
+        out, n = self._change_scene(pid, restore)
+        return json_ready(out | {"remeasured_points": n})
+
+    def _change_scene(self, pid: str, change: Callable[[Transaction, Project, Path, SceneFrame],
+                                                       JSONObject]) -> tuple[JSONObject, int]:
+        """Run ``change`` (which writes the scene's tileset.json) and re-measure every point of
+        every project on the scene, in one store transaction; the tileset is put back when
+        the store cannot follow. Returns what ``change`` returned and the points re-measured."""
         written: tuple[Path, bytes] | None = None
         try:
             with self.store.transaction() as tx:
@@ -702,18 +705,17 @@ class Projects:
                 path = scene_path(self.data_dir, p.scene)
                 ctx = scene_frame(self.data_dir, p.scene)
                 if path is None or ctx is None:
-                    raise InputError(f"project '{pid}' has no scene", field="scene")
+                    raise InputError(f"project '{pid}' has no scene to georeference",
+                                     field="scene")
                 before = path.read_bytes()
-                state, sim = undo_scene(path)
+                out = change(tx, p, path, ctx)
                 written = (path, before)
                 n = self._remeasure_scene(tx, p.scene, ctx)
         except BaseException as exc:
             if written is not None:
                 restore_on_failure(*written, exc)
             raise
-        return json_ready({"version": state.version, "georeferenced": state.georeferenced,
-                           "root_transform": column_major(state.root_transform),
-                           "similarity": column_major(sim), "remeasured_points": n})
+        return out, n
 
     def _remeasure_scene(self, tx: Transaction, scene: str | None, before: SceneFrame) -> int:
         """Re-measure every point of every project on ``scene`` in the scene's new frame;
