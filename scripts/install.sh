@@ -2,7 +2,7 @@
 # Install gsgeo into a virtual environment (.venv, reused when present) on a Debian 12 machine
 # with python3 (>= 3.11) and, where missing, installs python3-venv and Node.js's npm through apt.
 #   bash scripts/install.sh          the package, its run-time dependencies and the web client
-#   bash scripts/install.sh --test   the same plus the test tools and Debian's chromium and proj-data
+#   bash scripts/install.sh --test   the same plus the test tools and Debian's chromium, proj-data and QGIS
 # Afterwards: `.venv/bin/gsgeo ...`, or `. .venv/bin/activate` once and then `gsgeo ...`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -50,6 +50,16 @@ if [ "$test_deps" = 1 ]; then
     # egm96_15.gtx, the one geoid Debian ships, for the vertical-datum tests.
     [ -f /usr/share/proj/egm96_15.gtx ] || missing+=(proj-data)
     if [ "${#missing[@]}" -gt 0 ]; then apt_install "${missing[@]}"; fi
+    # Debian's QGIS Python and its providers (OAPIF) for the QGIS plugin's headless test;
+    # where apt has no QGIS, that test skips and says why.
+    qgis=()
+    for pkg in python3-qgis qgis-providers; do
+        dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || qgis+=("$pkg")
+    done
+    if [ "${#qgis[@]}" -gt 0 ]; then
+        apt_install --no-install-recommends "${qgis[@]}" \
+            || echo "could not install ${qgis[*]}: tests/test_qgis_plugin.py will skip" >&2
+    fi
 else
     "${PIP[@]}" -e .
 fi

@@ -1,0 +1,174 @@
+"""Headless driver of the plugin for tests: QGIS without a display, commands on stdin.
+
+Run with Debian's QGIS Python (``QT_QPA_PLATFORM=offscreen /usr/bin/python3
+qgis/harness.py``). It loads the plugin package ``gsgeo`` from this directory (through
+``classFactory``, as QGIS does) with a minimal stand-in for QGIS's interface, then reads one
+JSON command per line and answers each with one line ``@@ {json}`` on stdout (anything else
+on stdout is QGIS's own chatter). Commands (``cmd``):
+
+- ``connect`` {url, token}: the plugin's connect; answers the project ids.
+- ``add_layers`` {project}: choose the project and add its layers; answers ``layers``.
+- ``refresh``: reload the gsgeo layers; answers ``layers``.
+- ``send`` {collection, ids, role}: select the features of that layer whose point_id is in
+  ``ids`` and send them; answers the server's reply and the body the plugin built.
+- ``viewer`` {lon, lat}: the map tool's click at lon, lat (map in EPSG:4326); answers the URL.
+- ``quit``.
+
+``layers`` describes every gsgeo layer: name, collection, validity, provider, CRS, the
+feature count by reading, and each feature's point_id/id with x, y, z in the layer's CRS and
+in ``to_crs`` (EPSG code given with the command) transformed by QGIS.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import traceback
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from qgis.core import (  # noqa: E402 (the plugin's directory must be on the path first)
+    Qgis,
+    QgsApplication,
+    QgsCoordinateReferenceSystem,
+    QgsCoordinateTransform,
+    QgsFeatureRequest,
+    QgsPointXY,
+    QgsProject,
+    QgsVectorLayer,
+)
+from qgis.gui import QgsMapCanvas  # noqa: E402
+from qgis.PyQt.QtWidgets import QMainWindow, QToolBar  # noqa: E402
+
+
+class Iface:
+    """The parts of QgisInterface the plugin uses."""
+
+    def __init__(self) -> None:
+        self.window = QMainWindow()
+        self.canvas = QgsMapCanvas(self.window)
+        self.active: QgsVectorLayer | None = None
+        self.messages: list[str] = []
+
+    def mainWindow(self) -> QMainWindow:
+        return self.window
+
+    def mapCanvas(self) -> QgsMapCanvas:
+        return self.canvas
+
+    def messageBar(self) -> Iface:
+        return self
+
+    def pushMessage(self, title: str, text: str, level: Any = None, duration: int = 0) -> None:
+        self.messages.append(text)
+
+    def addToolBar(self, name: str) -> QToolBar:
+        return self.window.addToolBar(name)
+
+    def addPluginToMenu(self, menu: str, action: Any) -> None:
+        pass
+
+    def removePluginMenu(self, menu: str, action: Any) -> None:
+        pass
+
+    def activeLayer(self) -> QgsVectorLayer | None:
+        return self.active
+
+
+def describe(layer: QgsVectorLayer, to_crs: str | None) -> dict[str, Any]:
+    xf = None
+    if to_crs:
+        xf = QgsCoordinateTransform(layer.crs(), QgsCoordinateReferenceSystem(to_crs),
+                                    QgsProject.instance())
+    feats = []
+    names = layer.fields().names()
+    for f in layer.getFeatures(QgsFeatureRequest()):
+        g = f.geometry()
+        row: dict[str, Any] = {"fid": f.id()}
+        for key in ("point_id", "id", "code", "role"):
+            if key in names:
+                row[key] = f[key]
+        if not g.isNull():
+            v = next(iter(g.constGet().vertices()))
+            row["xyz"] = [v.x(), v.y(), v.z() if v.is3D() else None]
+            if xf is not None:
+                p = xf.transform(QgsPointXY(v.x(), v.y()))
+                row["grid"] = [p.x(), p.y()]
+        feats.append(row)
+    return {"name": layer.name(), "collection": layer.customProperty("gsgeo/collection"),
+            "valid": layer.isValid(), "provider": layer.providerType(),
+            "crs": layer.crs().authid(), "fields": names, "count": len(feats),
+            "features": feats, "source": layer.source()}
+
+
+def layers_of(to_crs: str | None) -> list[dict[str, Any]]:
+    from gsgeo.layers import gsgeo_layers
+
+    return [describe(lyr, to_crs) for lyr in gsgeo_layers(QgsProject.instance())]
+
+
+def run(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
+    from gsgeo.client import Connection
+    from gsgeo.layers import gsgeo_layers
+
+    name = cmd["cmd"]
+    if name == "connect":
+        projects = plugin.connect(Connection(cmd["url"], cmd.get("token", "")))
+        return {"projects": [p["id"] for p in projects]}
+    if name == "add_layers":
+        plugin.choose_project(cmd["project"])
+        plugin.add_layers()
+        return {"layers": layers_of(cmd.get("to_crs")), "messages": iface.messages}
+    if name == "refresh":
+        n = plugin.refresh()
+        return {"refreshed": n, "layers": layers_of(cmd.get("to_crs"))}
+    if name == "send":
+        layer = next(lyr for lyr in gsgeo_layers(QgsProject.instance())
+                     if lyr.customProperty("gsgeo/collection") == cmd["collection"])
+        ids = [f.id() for f in layer.getFeatures() if f["point_id"] in cmd["ids"]]
+        layer.selectByIds(ids)
+        iface.active = layer
+        from gsgeo.checkpoints import layer_payload
+
+        body, _ = layer_payload(layer, cmd["role"])
+        answer = plugin.send_selected(cmd["role"])
+        return {"answer": answer, "body": body, "selected": len(ids), "messages": iface.messages}
+    if name == "viewer":
+        opened: list[str] = []
+        plugin.open_url = opened.append
+        plugin.map_tool.clicked(QgsPointXY(cmd["lon"], cmd["lat"]), 1)
+        return {"opened": opened}
+    raise ValueError(f"unknown command {name!r}")
+
+
+def main() -> int:
+    app = QgsApplication([], True)
+    app.initQgis()
+    import gsgeo
+
+    iface = Iface()
+    iface.canvas.setDestinationCrs(QgsCoordinateReferenceSystem("EPSG:4326"))
+    plugin = gsgeo.classFactory(iface)
+    plugin.initGui()
+    print("@@ " + json.dumps({"ready": True, "qgis": Qgis.QGIS_VERSION}), flush=True)
+    for line in sys.stdin:
+        if not line.strip():
+            continue
+        cmd = json.loads(line)
+        if cmd["cmd"] == "quit":
+            break
+        try:
+            out = run(plugin, iface, cmd)
+        except Exception as exc:  # the test shows it; the harness goes on
+            out = {"error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc()}
+        print("@@ " + json.dumps(out, default=str), flush=True)
+    plugin.unload()
+    QgsProject.instance().clear()
+    app.exitQgis()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

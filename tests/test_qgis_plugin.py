@@ -1,0 +1,231 @@
+"""The QGIS plugin (qgis/gsgeo): its zip, and the plugin in a headless QGIS against a live
+`gsgeo serve` that wants a token.
+
+QGIS runs in Debian's own Python (python3-qgis; the project's .venv cannot import it) as a
+subprocess, qgis/harness.py, driven line by line; it skips, saying why, where that Python
+has no QGIS.
+"""
+
+from __future__ import annotations
+
+import ast
+import configparser
+import json
+import os
+import queue
+import subprocess
+import sys
+import threading
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from servertools import LONDON, ecef_of, rays_at, start_server
+
+REPO = Path(__file__).resolve().parents[1]
+PLUGIN = REPO / "qgis" / "gsgeo"
+QGIS_PYTHON = os.environ.get("GSGEO_QGIS_PYTHON", "/usr/bin/python3")
+TOKEN = "qgis-test-token"
+GRID = "EPSG:27700"
+#: Seconds the harness may take for one command (QGIS's start included).
+STEP_TIMEOUT = 60.0
+
+
+def qgis_missing() -> str | None:
+    """Why QGIS cannot run here, or None."""
+    if not Path(QGIS_PYTHON).exists():
+        return f"{QGIS_PYTHON} does not exist (Debian's python3 with python3-qgis)"
+    probe = subprocess.run(
+        [QGIS_PYTHON, "-c", "import qgis.core, qgis.gui; from qgis.core import Qgis; "
+                            "print(Qgis.QGIS_VERSION)"],
+        capture_output=True, text=True, cwd="/", env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    if probe.returncode != 0:
+        return ("python3-qgis is not installed (bash scripts/install.sh --test installs it "
+                f"where apt has it): {probe.stderr.strip().splitlines()[-1:]}")
+    return None
+
+
+# the zip and the code ----------------------------------------------------------------------
+def test_zip_has_the_layout_qgis_installs(tmp_path):
+    out = tmp_path / "out" / "gsgeo-qgis.zip"
+    r = subprocess.run(["bash", "scripts/build_qgis_plugin.sh", str(out)], cwd=REPO,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    with zipfile.ZipFile(out) as z:
+        names = set(z.namelist())
+        meta = configparser.ConfigParser()
+        meta.read_string(z.read("gsgeo/metadata.txt").decode())
+        init = ast.parse(z.read("gsgeo/__init__.py"))
+    expected = {f"gsgeo/{p.relative_to(PLUGIN)}" for p in PLUGIN.rglob("*")
+                if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"}
+    assert names == expected
+    assert all(n.startswith("gsgeo/") for n in names)
+    assert meta["general"]["qgisMinimumVersion"] == "3.22"
+    for key in ("name", "description", "version", "author", "email"):
+        assert meta["general"][key].strip(), key
+    assert any(isinstance(n, ast.FunctionDef) and n.name == "classFactory" for n in init.body)
+
+
+def test_plugin_talks_http_only():
+    """No module of the plugin imports the gsgeo package (only its own modules, relatively)."""
+    for path in PLUGIN.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                assert not any(a.name.split(".")[0] == "gsgeo" for a in node.names), path
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                assert (node.module or "").split(".")[0] != "gsgeo", path
+
+
+def test_ruff_and_mypy_pass_on_the_plugin(tmp_path):
+    """ruff (the project's rules) and mypy with every function annotated; QGIS's own modules
+    are not importable in .venv, so mypy takes them as untyped."""
+    r = subprocess.run([sys.executable, "-m", "ruff", "check", "qgis"], cwd=REPO,
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    r = subprocess.run([sys.executable, "-m", "mypy", "qgis/gsgeo", "--ignore-missing-imports",
+                        "--disallow-untyped-defs", "--disallow-incomplete-defs",
+                        "--cache-dir", str(tmp_path / "mypy")],
+                       cwd=REPO, capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+# the plugin in QGIS ------------------------------------------------------------------------
+class Harness:
+    """qgis/harness.py under Debian's Python: one JSON command in, one ``@@`` line out."""
+
+    def __init__(self, home: Path):
+        home.mkdir(parents=True, exist_ok=True)
+        env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "HOME": str(home),
+               "QGIS_CUSTOM_CONFIG_PATH": str(home / "qgis-profile"),
+               "XDG_RUNTIME_DIR": str(home)}
+        env.pop("PYTHONPATH", None)
+        self.log = (home / "harness.log").open("w")
+        self.proc = subprocess.Popen([QGIS_PYTHON, str(REPO / "qgis" / "harness.py")],
+                                     cwd=home, env=env, text=True, stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=self.log)
+        self.lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self.pump, daemon=True).start()
+        self.hello = self.answer()
+
+    def pump(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.startswith("@@ "):
+                self.lines.put(line[3:])
+        self.lines.put("")
+
+    def answer(self) -> dict[str, Any]:
+        try:
+            line = self.lines.get(timeout=STEP_TIMEOUT)
+        except queue.Empty:
+            raise AssertionError(f"the QGIS harness did not answer in {STEP_TIMEOUT} s") from None
+        if not line:
+            raise AssertionError(f"the QGIS harness ended: {Path(self.log.name).read_text()[-3000:]}")
+        return json.loads(line)
+
+    def __call__(self, cmd: str, **kw: Any) -> dict[str, Any]:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps({"cmd": cmd, **kw}) + "\n")
+        self.proc.stdin.flush()
+        out = self.answer()
+        assert "error" not in out or cmd == "connect", out.get("trace") or out
+        return out
+
+    def close(self) -> None:
+        if self.proc.poll() is None and self.proc.stdin is not None:
+            try:
+                self.proc.stdin.write('{"cmd": "quit"}\n')
+                self.proc.stdin.flush()
+                self.proc.wait(20)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+                self.proc.wait(10)
+        self.log.close()
+
+
+def place(k: int) -> tuple[float, float, float]:
+    """The k-th test point: lon, lat (degrees), WGS 84 ellipsoidal height (m), near London."""
+    return (LONDON[0] + 3e-4 * k, LONDON[1] + 2e-4 * k, 40.0 + k)
+
+
+@pytest.fixture
+def live(tmp_path):
+    """A server that wants a token, a project in EPSG:27700 with points P1..P3, the harness."""
+    reason = qgis_missing()
+    if reason:
+        pytest.skip(reason)
+    proc, base = start_server(tmp_path / "data", env={"GSGEO_TOKEN": TOKEN})
+    http = httpx.Client(base_url=base, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=30)
+    harness = None
+    try:
+        pid = http.post("/api/projects", json={"name": "QGIS test", "crs": GRID}).json()["id"]
+        for k in (1, 2, 3):
+            r = http.post(f"/api/projects/{pid}/points",
+                          json={"id": f"P{k}", "code": "mark", "rays": rays_at(ecef_of(*place(k)))})
+            assert r.status_code == 201, r.text
+        harness = Harness(tmp_path / "home")
+        yield base, http, pid, harness
+    finally:
+        if harness is not None:
+            harness.close()
+        http.close()
+        proc.terminate()
+        proc.wait(10)
+
+
+def layer(layers: list[dict[str, Any]], collection: str) -> dict[str, Any]:
+    found = [lyr for lyr in layers if lyr["collection"] == collection]
+    assert found, f"no layer of {collection}: {[lyr['collection'] for lyr in layers]}"
+    return found[0]
+
+
+def test_plugin_adds_live_layers_and_sends_control_points(live):
+    base, http, pid, qgis = live
+    bad = qgis("connect", url=base, token="wrong")["error"]  # said, not a crash
+    assert "401" in bad and "GsgeoApiError" in bad
+    assert pid in qgis("connect", url=base, token=TOKEN)["projects"]
+
+    added = qgis("add_layers", project=pid, to_crs=GRID)
+    layers = added["layers"]
+    assert not [m for m in added["messages"] if "could not" in m or "no collections" in m]
+    assert all(lyr["valid"] and lyr["provider"] == "OAPIF" for lyr in layers), layers
+    assert all(f"url='{base}/ogc'" in lyr["source"] and TOKEN not in lyr["source"] for lyr in layers)
+    assert {f"{pid}.points", f"{pid}.lines", f"{pid}.polygons"} <= {lyr["collection"] for lyr in layers}
+
+    api = {q["id"]: q["record"] for q in
+           http.get(f"/api/projects/{pid}/points", params={"summary": True}).json()["points"]}
+    points = layer(layers, f"{pid}.points")
+    assert points["crs"] in ("EPSG:4326", "OGC:CRS84")  # what QGIS 3.22's OAPIF reads
+    assert points["count"] == len(api) == 3
+    got = {f["point_id"]: f for f in points["features"]}
+    assert set(got) == set(api)
+    for pt_id, rec in api.items():
+        lon, lat, h = got[pt_id]["xyz"]
+        assert abs(lon - rec["lon"]) < 1e-9 and abs(lat - rec["lat"]) < 1e-9
+        assert abs(h - rec["h_wgs84"]) < 1e-4
+        e, n = got[pt_id]["grid"]  # CRS84 taken into the grid by QGIS itself
+        assert abs(e - rec["easting"]) < 1e-3 and abs(n - rec["northing"]) < 1e-3, (pt_id, rec)
+
+    # live: a point stored now is in the layer after a refresh
+    r = http.post(f"/api/projects/{pid}/points", json={"id": "P4", "rays": rays_at(ecef_of(*place(4)))})
+    assert r.status_code == 201
+    again = layer(qgis("refresh")["layers"], f"{pid}.points")
+    assert again["count"] == 4 and "P4" in {f["point_id"] for f in again["features"]}
+
+    # select P2 and send it as a control point
+    sent = qgis("send", collection=f"{pid}.points", ids=["P2"], role="control")
+    assert sent["selected"] == 1 and sent["answer"] == {"imported": 1}, sent
+    cps = http.get(f"/api/projects/{pid}/checkpoints").json()["check_points"]
+    assert [(c["id"], c["role"], c["crs"]) for c in cps] == [("P2", "control", "EPSG:4979")]
+    rec = api["P2"]
+    assert abs(cps[0]["x"] - rec["lon"]) < 1e-9 and abs(cps[0]["y"] - rec["lat"]) < 1e-9
+    assert abs(cps[0]["z"] - rec["h_wgs84"]) < 1e-4
+    # in the map too, though that layer was empty (so without fields) when it was added
+    shown = layer(qgis("refresh")["layers"], f"{pid}.check_points")["features"]
+    assert [(f["point_id"], f["role"]) for f in shown] == [("P2", "control")], shown
+
+    # the measuring view at a clicked place (the map is in EPSG:4326 in the harness)
+    opened = qgis("viewer", lon=-0.1, lat=51.5)["opened"]
+    assert opened == [f"{base}/?project={pid}&lon=-0.10000000&lat=51.50000000#token={TOKEN}"]
