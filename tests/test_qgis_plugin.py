@@ -229,3 +229,45 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
     # the measuring view at a clicked place (the map is in EPSG:4326 in the harness)
     opened = qgis("viewer", lon=-0.1, lat=51.5)["opened"]
     assert opened == [f"{base}/?project={pid}&lon=-0.10000000&lat=51.50000000#token={TOKEN}"]
+
+
+# the measuring view at a place (web/js/main.js: ?lon=&lat=) ---------------------------------
+LOOK_AT_JS = """() => {
+  const C = gsgeo.Cesium, cam = gsgeo.viewer.camera;
+  const target = C.Cartesian3.add(cam.positionWC,
+      C.Cartesian3.multiplyByScalar(cam.directionWC, 40, new C.Cartesian3()), new C.Cartesian3());
+  const g = C.Cartographic.fromCartesian(target);
+  return [C.Math.toDegrees(g.longitude), C.Math.toDegrees(g.latitude)];
+}"""
+
+
+@pytest.mark.e2e
+def test_viewer_looks_at_the_place_in_the_url(tmp_path):
+    """The URL the map tool opens: the viewer's camera looks at lon, lat (40 m away); a
+    lon/lat that is not a place is said, and the viewer still starts."""
+    import importlib.util
+
+    from tests.e2e.workplace import CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, ORIGIN, SCENE, make_data_dir
+
+    if not CHROMIUM.exists() or importlib.util.find_spec("playwright") is None \
+            or not CESIUM_JS.is_file():
+        pytest.skip("needs Debian's chromium, Playwright and web/node_modules (install.sh --test)")
+    from playwright.sync_api import sync_playwright
+
+    proc, base = start_server(make_data_dir(tmp_path))
+    lat, lon = ORIGIN[0] + 1e-4, ORIGIN[1] - 2e-4
+    try:
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 800, "height": 600})
+            page.goto(f"{base}/?scene={SCENE}&lon={lon}&lat={lat}")
+            page.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
+            got = page.evaluate(LOOK_AT_JS)
+            assert abs(got[0] - lon) < 1e-6 and abs(got[1] - lat) < 1e-6, got
+            page.goto(f"{base}/?scene={SCENE}&lon=east&lat={lat}")
+            page.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
+            assert "is not a place" in page.inner_text("#messages")
+            browser.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)

@@ -815,6 +815,22 @@ function wire() {
   $("#check-form").addEventListener("submit", importCheckPoints);
 }
 
+/** ?lon=&lat= (WGS 84 degrees, as the QGIS plugin sends): look down at that place, at the
+ *  height of the scene's centre (the ground is not known before the tiles load). */
+function lookAtPlace(params) {
+  if (!params.has("lon") && !params.has("lat")) return;
+  const lon = Number(params.get("lon")), lat = Number(params.get("lat"));
+  if (!params.get("lon") || !params.get("lat") || !Number.isFinite(lon) || !Number.isFinite(lat)
+      || Math.abs(lat) > 90 || Math.abs(lon) > 180) {
+    message(`lon=${params.get("lon")}&lat=${params.get("lat")} is not a place (degrees, both needed).`, true);
+    return;
+  }
+  const h = state.tileset ? Cesium.Cartographic.fromCartesian(state.tileset.boundingSphere.center).height : 0;
+  viewer.camera.flyToBoundingSphere(new Cesium.BoundingSphere(Cesium.Cartesian3.fromDegrees(lon, lat, h), 5), {
+    offset: new Cesium.HeadingPitchRange(0, -0.7, 40), duration: 0,
+  });
+}
+
 // ---------------------------------------------------------------------------------------
 // start
 
@@ -836,6 +852,7 @@ async function start() {
   else await loadScene(null);
   if (project) await openProject(project.id);
   else if (pid) message(`There is no project '${pid}'.`, true);
+  lookAtPlace(params);
   renderAll();
   window.gsgeo.ready = true;
 }
