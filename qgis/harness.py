@@ -11,6 +11,10 @@ on stdout is QGIS's own chatter). Commands (``cmd``):
 - ``refresh``: reload the gsgeo layers; answers ``layers``.
 - ``send`` {collection, ids, role}: select the features of that layer whose point_id is in
   ``ids`` and send them; answers the server's reply and the body the plugin built.
+- ``send_memory`` {crs, rows, role}: the same from a memory layer of the user's own.
+- ``dialog`` {url, token}: the Connect dialog's "List projects"; answers what it shows.
+- ``settings``: the connection and project as stored in QgsSettings.
+- ``live`` {on}: the Live toggle; answers whether the timer runs.
 - ``viewer`` {lon, lat}: the map tool's click at lon, lat (map in EPSG:4326); answers the URL.
 - ``quit``.
 
@@ -135,12 +139,52 @@ def run(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
         body, _ = layer_payload(layer, cmd["role"])
         answer = plugin.send_selected(cmd["role"])
         return {"answer": answer, "body": body, "selected": len(ids), "messages": iface.messages}
+    if name == "send_memory":
+        return send_memory(plugin, iface, cmd)
+    if name == "dialog":
+        from gsgeo.dialog import ConnectDialog
+
+        dlg = ConnectDialog(Connection(cmd["url"], cmd.get("token", "")), "")
+        dlg.list_projects()
+        return {"status": dlg.status.text(), "items": dlg.project.count(),
+                "ok": dlg.buttons.button(dlg.buttons.Ok).isEnabled()}
+    if name == "settings":
+        from gsgeo.settings import load_connection, load_project
+
+        c = load_connection()
+        return {"url": c.url, "token": c.token, "project": load_project()}
+    if name == "live":
+        plugin.set_live(cmd["on"])
+        return {"active": plugin.timer.isActive(), "interval_ms": plugin.timer.interval()}
     if name == "viewer":
         opened: list[str] = []
         plugin.open_url = opened.append
         plugin.map_tool.clicked(QgsPointXY(cmd["lon"], cmd["lat"]), 1)
         return {"opened": opened}
     raise ValueError(f"unknown command {name!r}")
+
+
+def send_memory(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
+    """A layer of the user's own (memory, ``crs``, a ``name`` field) with ``rows``
+    [{name, x, y[, z]}] all selected, sent with the plugin."""
+    from qgis.core import QgsFeature, QgsGeometry, QgsPoint
+
+    kind = "PointZ" if any("z" in r for r in cmd["rows"]) else "Point"
+    layer = QgsVectorLayer(f"{kind}?crs={cmd['crs']}&field=name:string", "mine", "memory")
+    feats = []
+    for r in cmd["rows"]:
+        f = QgsFeature(layer.fields())
+        f["name"] = r.get("name")
+        p = QgsPoint(r["x"], r["y"], r["z"]) if "z" in r else QgsPoint(r["x"], r["y"])
+        f.setGeometry(QgsGeometry(p))
+        feats.append(f)
+    layer.dataProvider().addFeatures(feats)
+    QgsProject.instance().addMapLayer(layer)
+    layer.selectAll()
+    iface.active = layer
+    answer = plugin.send_selected(cmd["role"])
+    QgsProject.instance().removeMapLayer(layer.id())
+    return {"answer": answer, "messages": iface.messages}
 
 
 def main() -> int:

@@ -226,6 +226,33 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
     shown = layer(qgis("refresh")["layers"], f"{pid}.check_points")["features"]
     assert [(f["point_id"], f["role"]) for f in shown] == [("P2", "control")], shown
 
+    # nothing selected: nothing sent, and said
+    none = qgis("send", collection=f"{pid}.points", ids=[], role="check")
+    assert none["answer"] is None and "No selected point features" in none["messages"][-1]
+    # a layer of the user's own in the grid, ids from its name field, else the feature id
+    mine = qgis("send_memory", crs=GRID, role="check",
+                rows=[{"name": "CP9", "x": 530100.25, "y": 180400.5, "z": 12.5},
+                      {"name": None, "x": 530110.0, "y": 180410.0, "z": 13.0}])
+    assert mine["answer"] == {"imported": 2}, mine
+    cps = {c["id"]: c for c in http.get(f"/api/projects/{pid}/checkpoints").json()["check_points"]}
+    assert (cps["CP9"]["role"], cps["CP9"]["crs"]) == ("check", GRID)
+    assert (cps["CP9"]["x"], cps["CP9"]["y"], cps["CP9"]["z"]) == (530100.25, 180400.5, 12.5)
+    assert set(cps) == {"P2", "CP9", "2"}
+    # a refused request is said with the server's reason, nothing stored
+    dup = qgis("send_memory", crs=GRID, role="check",
+               rows=[{"name": "X", "x": 1.0, "y": 2.0}, {"name": "X", "x": 3.0, "y": 4.0}])
+    assert dup["answer"] is None and "duplicate id 'X'" in dup["messages"][-1], dup
+    assert len(http.get(f"/api/projects/{pid}/checkpoints").json()["check_points"]) == 3
+
+    # the Connect dialog lists the projects; the connection is kept in QgsSettings
+    shown = qgis("dialog", url=base, token=TOKEN)
+    assert shown["items"] == 1 and shown["ok"], shown
+    refused = qgis("dialog", url="ftp://nowhere", token="")
+    assert "http://host:port" in refused["status"] and not refused["ok"]
+    assert qgis("settings") == {"url": base, "token": TOKEN, "project": pid}
+    assert qgis("live", on=True) == {"active": True, "interval_ms": 5000}
+    assert qgis("live", on=False)["active"] is False
+
     # the measuring view at a clicked place (the map is in EPSG:4326 in the harness)
     opened = qgis("viewer", lon=-0.1, lat=51.5)["opened"]
     assert opened == [f"{base}/?project={pid}&lon=-0.10000000&lat=51.50000000#token={TOKEN}"]
