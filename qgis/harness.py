@@ -15,6 +15,7 @@ on stdout is QGIS's own chatter). Commands (``cmd``):
 - ``dialog`` {url, token}: the Connect dialog's "List projects"; answers what it shows.
 - ``settings``: the connection and project as stored in QgsSettings.
 - ``live`` {on}: the Live toggle; answers whether the timer runs.
+- ``ellipse`` {major, minor, bearing}: a point with that error ellipse, drawn and measured.
 - ``viewer`` {lon, lat}: the map tool's click at lon, lat (map in EPSG:4326); answers the URL.
 - ``quit``.
 
@@ -156,6 +157,8 @@ def run(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
     if name == "live":
         plugin.set_live(cmd["on"])
         return {"active": plugin.timer.isActive(), "interval_ms": plugin.timer.interval()}
+    if name == "ellipse":
+        return render_ellipse(cmd["major"], cmd["minor"], cmd["bearing"])
     if name == "viewer":
         opened: list[str] = []
         plugin.open_url = opened.append
@@ -185,6 +188,55 @@ def send_memory(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any
     answer = plugin.send_selected(cmd["role"])
     QgsProject.instance().removeMapLayer(layer.id())
     return {"answer": answer, "messages": iface.messages}
+
+
+def render_ellipse(major: float, minor: float, bearing: float) -> dict[str, Any]:
+    """Render one point styled as a gsgeo point with that 95 % ellipse (metres, degrees
+    clockwise from grid north) on a 0.2 m square map in EPSG:27700 (2000 px per metre) and
+    measure the drawn outline: its long axis's bearing and its half-lengths (m)."""
+    import numpy as np
+    from qgis.core import (
+        QgsFeature,
+        QgsGeometry,
+        QgsMapRendererSequentialJob,
+        QgsMapSettings,
+        QgsRectangle,
+    )
+    from qgis.PyQt.QtCore import QSize
+    from qgis.PyQt.QtGui import QColor
+
+    from gsgeo.styles import apply_style
+
+    layer = QgsVectorLayer("Point?crs=EPSG:27700&field=point_id:string&field=ellipse_major_95:"
+                           "double&field=ellipse_minor_95:double&field=ellipse_bearing_deg:double",
+                           "ellipse", "memory")
+    f = QgsFeature(layer.fields())
+    f.setAttributes(["", major, minor, bearing])
+    f.setGeometry(QgsGeometry.fromPointXY(QgsPointXY(500000.0, 200000.0)))
+    layer.dataProvider().addFeatures([f])
+    apply_style(layer, "points")
+    ms = QgsMapSettings()
+    ms.setDestinationCrs(layer.crs())
+    ms.setLayers([layer])
+    ms.setExtent(QgsRectangle(499999.9, 199999.9, 500000.1, 200000.1))
+    ms.setOutputSize(QSize(400, 400))
+    ms.setBackgroundColor(QColor("white"))
+    job = QgsMapRendererSequentialJob(ms)
+    job.start()
+    job.waitForFinished()
+    img = job.renderedImage()
+    px = 400 / 0.2
+    ys, xs = np.nonzero([[img.pixelColor(x, y).green() < 200 for x in range(400)]
+                         for y in range(400)])
+    east, north = (xs + 0.5 - 200) / px, (200 - ys - 0.5) / px
+    ring = np.hypot(east, north) > 0.004  # the outline, not the dot in the middle
+    e, n = east[ring], north[ring]
+    w, v = np.linalg.eigh(np.cov(np.vstack([e, n])))
+    axis = v[:, 1]
+    along = np.abs(e * axis[0] + n * axis[1]).max()
+    across = np.abs(-e * axis[1] + n * axis[0]).max()
+    return {"bearing": float(np.degrees(np.arctan2(axis[0], axis[1])) % 180.0),
+            "major": float(along), "minor": float(across)}
 
 
 def main() -> int:

@@ -253,6 +253,11 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
     assert qgis("live", on=True) == {"active": True, "interval_ms": 5000}
     assert qgis("live", on=False)["active"] is False
 
+    # the error ellipse is drawn to ground scale along its bearing (clockwise from north)
+    drawn = qgis("ellipse", major=0.06, minor=0.02, bearing=60.0)
+    assert abs(drawn["bearing"] - 60.0) < 2.0, drawn
+    assert abs(drawn["major"] - 0.06) < 0.003 and abs(drawn["minor"] - 0.02) < 0.003, drawn
+
     # the measuring view at a clicked place (the map is in EPSG:4326 in the harness)
     opened = qgis("viewer", lon=-0.1, lat=51.5)["opened"]
     assert opened == [f"{base}/?project={pid}&lon=-0.10000000&lat=51.50000000#token={TOKEN}"]
