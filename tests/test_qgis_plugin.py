@@ -213,6 +213,9 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
     assert r.status_code == 201
     again = layer(qgis("refresh")["layers"], f"{pid}.points")
     assert again["count"] == 4 and "P4" in {f["point_id"] for f in again["features"]}
+    # adding the project again reloads its layers, it does not add them twice
+    twice = qgis("add_layers", project=pid)["layers"]
+    assert sorted(lyr["collection"] for lyr in twice) == sorted(lyr["collection"] for lyr in layers)
 
     # select P2 and send it as a control point
     sent = qgis("send", collection=f"{pid}.points", ids=["P2"], role="control")

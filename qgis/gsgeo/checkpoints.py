@@ -13,6 +13,7 @@ import math
 from typing import Any
 
 from qgis.core import QgsCoordinateReferenceSystem, QgsVectorLayer, QgsWkbTypes
+from qgis.PyQt.QtCore import QVariant
 
 from .styles import NAME_FIELDS
 
@@ -39,7 +40,9 @@ def feature_name(feature: Any, fields: list[str]) -> str:
     """The feature's id for the server: a filled name field, else its QGIS feature id."""
     for f in fields:
         value = feature[f]
-        if value is not None and str(value).strip() and str(value) != "NULL":
+        if value is None or (isinstance(value, QVariant) and value.isNull()):
+            continue  # a NULL attribute (QGIS 3.22 gives a null QVariant)
+        if str(value).strip():
             return str(value).strip()
     return str(feature.id())
 

@@ -103,13 +103,14 @@ def refresh_layer(layer: QgsVectorLayer) -> None:
     """Drop what the provider has cached and draw again: the next read is the server's now.
 
     QGIS 3.22's OAPIF provider learns a layer's fields from its first features, so a layer
-    added while its collection was empty has none; once the collection has features, such a
-    layer is opened afresh (same source, name and place) and styled with its fields."""
-    if layer.fields().count() == 0 and layer.customProperty(PROP_COLLECTION):
+    added while its collection was empty has none; such a layer, and one that could not be
+    opened (the server was down), is opened afresh (same source, name and place) and styled
+    with the fields it has now."""
+    if not layer.isValid() or layer.fields().count() == 0:
         layer.setDataSource(layer.source(), layer.name(), layer.providerType())
         if layer.isValid() and layer.fields().count():
             apply_style(layer, layer_kind(layer))
-            return
+        return
     layer.dataProvider().reloadData()
     layer.triggerRepaint()
 
