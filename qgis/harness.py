@@ -16,6 +16,7 @@ on stdout is QGIS's own chatter). Commands (``cmd``):
 - ``settings``: the connection and project as stored in QgsSettings.
 - ``live`` {on}: the Live toggle; answers whether the timer runs.
 - ``ellipse`` {major, minor, bearing}: a point with that error ellipse, drawn and measured.
+- ``unload``: what QGIS does when the plugin is switched off; answers what is left.
 - ``viewer`` {lon, lat}: the map tool's click at lon, lat (map in EPSG:4326); answers the URL.
 - ``quit``.
 
@@ -148,7 +149,7 @@ def run(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
         dlg = ConnectDialog(Connection(cmd["url"], cmd.get("token", "")), "")
         dlg.list_projects()
         return {"status": dlg.status.text(), "items": dlg.project.count(),
-                "ok": dlg.buttons.button(dlg.buttons.Ok).isEnabled()}
+                "ok": dlg.buttons.button(dlg.buttons.StandardButton.Ok).isEnabled()}
     if name == "settings":
         from gsgeo.settings import load_connection, load_project
 
@@ -157,6 +158,10 @@ def run(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
     if name == "live":
         plugin.set_live(cmd["on"])
         return {"active": plugin.timer.isActive(), "interval_ms": plugin.timer.interval()}
+    if name == "unload":
+        plugin.unload()
+        return {"actions": len(plugin.actions), "token_hook": plugin.token.handle is not None,
+                "live": plugin.timer.isActive()}
     if name == "ellipse":
         return render_ellipse(cmd["major"], cmd["minor"], cmd["bearing"])
     if name == "viewer":
@@ -260,7 +265,8 @@ def main() -> int:
         except Exception as exc:  # the test shows it; the harness goes on
             out = {"error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc()}
         print("@@ " + json.dumps(out, default=str), flush=True)
-    plugin.unload()
+    if plugin.actions:
+        plugin.unload()
     QgsProject.instance().clear()
     app.exitQgis()
     return 0

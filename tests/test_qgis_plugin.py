@@ -265,6 +265,9 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
     opened = qgis("viewer", lon=-0.1, lat=51.5)["opened"]
     assert opened == [f"{base}/?project={pid}&lon=-0.10000000&lat=51.50000000#token={TOKEN}"]
 
+    # switched off: no action, no token on QGIS's requests, no timer left behind
+    assert qgis("unload") == {"actions": 0, "token_hook": False, "live": False}
+
 
 # the measuring view at a place (web/js/main.js: ?lon=&lat=) ---------------------------------
 LOOK_AT_JS = """() => {

@@ -17,10 +17,13 @@ from qgis.PyQt.QtWidgets import (
 
 from .client import Connection, GsgeoApiError, GsgeoClient, check_url
 
+# Qt's enums by their scoped names, which PyQt5 (QGIS 3) and PyQt6 both take.
+OK = QDialogButtonBox.StandardButton.Ok
+
 
 class ConnectDialog(QDialog):
     """Asks for the connection, lists the server's projects on "List projects"; after
-    ``exec_()`` returns true, ``connection`` and ``project_id`` hold the choice."""
+    ``exec()`` returns true, ``connection`` and ``project_id`` hold the choice."""
 
     def __init__(self, connection: Connection, project_id: str, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -30,14 +33,14 @@ class ConnectDialog(QDialog):
         self.projects: list[dict[str, Any]] = []
         self.url = QLineEdit(connection.url)
         self.token = QLineEdit(connection.token)
-        self.token.setEchoMode(QLineEdit.Password)
+        self.token.setEchoMode(QLineEdit.EchoMode.Password)
         self.token.setPlaceholderText("none (a server on loopback without GSGEO_TOKEN)")
         self.list_button = QPushButton("List projects")
         self.project = QComboBox()
         self.status = QLabel("")
         self.status.setWordWrap(True)
-        self.buttons = QDialogButtonBox(QDialogButtonBox.Ok | QDialogButtonBox.Cancel)
-        self.buttons.button(QDialogButtonBox.Ok).setEnabled(False)
+        self.buttons = QDialogButtonBox(OK | QDialogButtonBox.StandardButton.Cancel)
+        self.buttons.button(OK).setEnabled(False)
         form = QFormLayout(self)
         form.addRow("Server URL", self.url)
         form.addRow("Token", self.token)
@@ -66,7 +69,7 @@ class ConnectDialog(QDialog):
             self.project.setCurrentIndex(idx)
         self.status.setText(f"{len(self.projects)} project(s)" if self.projects
                             else "The server has no projects yet.")
-        self.buttons.button(QDialogButtonBox.Ok).setEnabled(bool(self.projects))
+        self.buttons.button(OK).setEnabled(bool(self.projects))
 
     def accept_choice(self) -> None:
         self.project_id = str(self.project.currentData() or "")

@@ -84,7 +84,7 @@ class GsgeoPlugin:
         return action
 
     # what the actions do -----------------------------------------------------------------
-    def say(self, text: str, level: Qgis.MessageLevel = Qgis.Info) -> None:
+    def say(self, text: str, level: Qgis.MessageLevel = Qgis.MessageLevel.Info) -> None:
         self.iface.messageBar().pushMessage("gsgeo", text, level=level, duration=8)
 
     def client(self) -> GsgeoClient:
@@ -105,12 +105,12 @@ class GsgeoPlugin:
 
     def show_connect(self) -> None:
         dlg = ConnectDialog(self.connection, self.project_id, self.iface.mainWindow())
-        if not dlg.exec_():
+        if not dlg.exec():
             return
         try:
             self.connect(dlg.connection)
         except GsgeoApiError as exc:
-            self.say(str(exc), Qgis.Critical)
+            self.say(str(exc), Qgis.MessageLevel.Critical)
             return
         self.choose_project(dlg.project_id)
         self.add_layers()
@@ -118,23 +118,23 @@ class GsgeoPlugin:
     def add_layers(self) -> list[QgsVectorLayer]:
         """Add the chosen project's collections as layers; says which are not valid."""
         if not self.project_id:
-            self.say("Connect and choose a project first.", Qgis.Warning)
+            self.say("Connect and choose a project first.", Qgis.MessageLevel.Warning)
             return []
         try:
             info = self.client().project(self.project_id)
             collections = self.client().collections()
         except GsgeoApiError as exc:
-            self.say(str(exc), Qgis.Critical)
+            self.say(str(exc), Qgis.MessageLevel.Critical)
             return []
         self.projects[self.project_id] = info
         title = f"gsgeo: {info.get('name') or self.project_id}"
         layers = add_project_layers(self.connection, collections, self.project_id, title)
         if not layers:
             self.say(f"The server lists no collections of project '{self.project_id}' "
-                     "(is /ogc served?)", Qgis.Warning)
+                     "(is /ogc served?)", Qgis.MessageLevel.Warning)
         bad = [lyr.name() for lyr in layers if not lyr.isValid()]
         if bad:
-            self.say(f"QGIS could not open: {', '.join(bad)}", Qgis.Critical)
+            self.say(f"QGIS could not open: {', '.join(bad)}", Qgis.MessageLevel.Critical)
         return layers
 
     def refresh(self) -> int:
@@ -166,21 +166,21 @@ class GsgeoPlugin:
         as check or control points; the server's answer, None when nothing was sent."""
         layer = layer or self.iface.activeLayer()
         if not isinstance(layer, QgsVectorLayer):
-            self.say("Select point features in a vector layer first.", Qgis.Warning)
+            self.say("Select point features in a vector layer first.", Qgis.MessageLevel.Warning)
             return None
         body, skipped = layer_payload(layer, role)
         note = f" ({skipped} selected feature(s) not a single point, left out)" if skipped else ""
         if body is None:
-            self.say(f"No selected point features in '{layer.name()}'{note}.", Qgis.Warning)
+            self.say(f"No selected point features in '{layer.name()}'{note}.", Qgis.MessageLevel.Warning)
             return None
         pid = str(layer.customProperty(PROP_PROJECT) or self.project_id)
         if not pid:
-            self.say("Connect and choose a project first.", Qgis.Warning)
+            self.say("Connect and choose a project first.", Qgis.MessageLevel.Warning)
             return None
         try:
             answer = self.client().add_check_points(pid, body)
         except GsgeoApiError as exc:
-            self.say(str(exc), Qgis.Critical)
+            self.say(str(exc), Qgis.MessageLevel.Critical)
             return None
         self.say(f"Sent {answer.get('imported', 0)} {role} point(s) to '{pid}'{note}.")
         refresh_layers(QgsProject.instance())

@@ -51,7 +51,7 @@ class OpenViewerTool(QgsMapToolEmitPoint):
         self.canvasClicked.connect(self.clicked)
 
     def clicked(self, point: QgsPointXY, button: Qt.MouseButton) -> None:
-        if button != Qt.LeftButton:
+        if button != Qt.MouseButton.LeftButton:
             return
         p = to_wgs84(point, self.canvas().mapSettings().destinationCrs())
         self.on_place(p.x(), p.y())
