@@ -202,6 +202,7 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
     got = {f["point_id"]: f for f in points["features"]}
     assert set(got) == set(api)
     for pt_id, rec in api.items():
+        assert got[pt_id]["code"] == rec["code"] == "mark"  # attributes come along
         lon, lat, h = got[pt_id]["xyz"]
         assert abs(lon - rec["lon"]) < 1e-9 and abs(lat - rec["lat"]) < 1e-9
         assert abs(h - rec["h_wgs84"]) < 1e-4
