@@ -253,7 +253,11 @@ def main() -> int:
     iface.canvas.setDestinationCrs(QgsCoordinateReferenceSystem("EPSG:4326"))
     plugin = gsgeo.classFactory(iface)
     plugin.initGui()
-    print("@@ " + json.dumps({"ready": True, "qgis": Qgis.QGIS_VERSION}), flush=True)
+    from qgis.core import QgsProviderRegistry
+
+    print("@@ " + json.dumps({"ready": True, "qgis": Qgis.QGIS_VERSION,
+                              "providers": QgsProviderRegistry.instance().providerList()}),
+          flush=True)
     for line in sys.stdin:
         if not line.strip():
             continue

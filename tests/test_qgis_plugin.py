@@ -26,7 +26,7 @@ from servertools import LONDON, ecef_of, rays_at, start_server
 
 REPO = Path(__file__).resolve().parents[1]
 PLUGIN = REPO / "qgis" / "gsgeo"
-QGIS_PYTHON = os.environ.get("GSGEO_QGIS_PYTHON", "/usr/bin/python3")
+QGIS_PYTHON = os.path.abspath(os.environ.get("GSGEO_QGIS_PYTHON", "/usr/bin/python3"))
 TOKEN = "qgis-test-token"
 GRID = "EPSG:27700"
 #: Seconds the harness may take for one command (QGIS's start included).
@@ -42,8 +42,9 @@ def qgis_missing() -> str | None:
                             "print(Qgis.QGIS_VERSION)"],
         capture_output=True, text=True, cwd="/", env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
     if probe.returncode != 0:
-        return ("python3-qgis is not installed (bash scripts/install.sh --test installs it "
-                f"where apt has it): {probe.stderr.strip().splitlines()[-1:]}")
+        last = (probe.stderr.strip().splitlines() or ["no message"])[-1]
+        return (f"{QGIS_PYTHON} cannot import QGIS ({last}); bash scripts/install.sh --test "
+                "installs Debian's python3-qgis where apt has it")
     return None
 
 
@@ -183,6 +184,7 @@ def layer(layers: list[dict[str, Any]], collection: str) -> dict[str, Any]:
 
 def test_plugin_adds_live_layers_and_sends_control_points(live):
     base, http, pid, qgis = live
+    assert "OAPIF" in qgis.hello["providers"], "QGIS has no OAPIF provider: install qgis-providers"
     bad = qgis("connect", url=base, token="wrong")["error"]  # said, not a crash
     assert "401" in bad and "GsgeoApiError" in bad
     assert pid in qgis("connect", url=base, token=TOKEN)["projects"]
