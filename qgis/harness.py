@@ -17,7 +17,7 @@ on stdout is QGIS's own chatter). Commands (``cmd``):
 - ``live`` {on}: the Live toggle; answers whether the timer runs.
 - ``ellipse`` {major, minor, bearing}: a point with that error ellipse, drawn and measured.
 - ``unload``: what QGIS does when the plugin is switched off; answers what is left.
-- ``viewer`` {lon, lat}: the map tool's click at lon, lat (map in EPSG:4326); answers the URL.
+- ``viewer`` {x, y, crs}: the map tool's click at x, y on a map in ``crs``; answers the URL.
 - ``quit``.
 
 ``layers`` describes every gsgeo layer: name, collection, validity, provider, CRS, the
@@ -167,7 +167,8 @@ def run(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
     if name == "viewer":
         opened: list[str] = []
         plugin.open_url = opened.append
-        plugin.map_tool.clicked(QgsPointXY(cmd["lon"], cmd["lat"]), 1)
+        iface.canvas.setDestinationCrs(QgsCoordinateReferenceSystem(cmd["crs"]))
+        plugin.map_tool.clicked(QgsPointXY(cmd["x"], cmd["y"]), 1)
         return {"opened": opened}
     raise ValueError(f"unknown command {name!r}")
 

@@ -19,6 +19,7 @@ import threading
 import zipfile
 from pathlib import Path
 from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 import httpx
 import pytest
@@ -264,9 +265,14 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
     assert abs(drawn["bearing"] - 60.0) < 2.0, drawn
     assert abs(drawn["major"] - 0.06) < 0.003 and abs(drawn["minor"] - 0.02) < 0.003, drawn
 
-    # the measuring view at a clicked place (the map is in EPSG:4326 in the harness)
-    opened = qgis("viewer", lon=-0.1, lat=51.5)["opened"]
-    assert opened == [f"{base}/?project={pid}&lon=-0.10000000&lat=51.50000000#token={TOKEN}"]
+    # the measuring view at a clicked place: a click on P3 on a map in the grid
+    p3 = api["P3"]
+    opened = qgis("viewer", x=p3["easting"], y=p3["northing"], crs=GRID)["opened"]
+    assert len(opened) == 1 and opened[0].startswith(f"{base}/?project={pid}&lon=")
+    assert opened[0].endswith(f"#token={TOKEN}")
+    query = parse_qs(urlsplit(opened[0]).query)
+    assert abs(float(query["lon"][0]) - p3["lon"]) < 1e-7
+    assert abs(float(query["lat"][0]) - p3["lat"]) < 1e-7
 
     # switched off: no action, no token on QGIS's requests, no timer left behind
     assert qgis("unload") == {"actions": 0, "token_hook": False, "live": False}
