@@ -23,7 +23,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import httpx
 import pytest
-from servertools import LONDON, ecef_of, rays_at, start_server
+from servertools import LONDON, ecef_of, free_port, rays_at, start_server
 
 REPO = Path(__file__).resolve().parents[1]
 PLUGIN = REPO / "qgis" / "gsgeo"
@@ -188,6 +188,8 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
     assert "OAPIF" in qgis.hello["providers"], "QGIS has no OAPIF provider: install qgis-providers"
     bad = qgis("connect", url=base, token="wrong")["error"]  # said, not a crash
     assert "401" in bad and "GsgeoApiError" in bad
+    down = qgis("connect", url=f"http://127.0.0.1:{free_port()}", token="")["error"]
+    assert "the server does not answer" in down, down
     assert pid in qgis("connect", url=base, token=TOKEN)["projects"]
 
     added = qgis("add_layers", project=pid, to_crs=GRID)

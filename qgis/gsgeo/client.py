@@ -1,21 +1,21 @@
-"""The gsgeo server's JSON API (/api) and OGC API - Features (/ogc), over plain HTTP.
+"""The gsgeo server's JSON API (/api) and OGC API - Features (/ogc), over HTTP.
 
-Standard library only (urllib), so that it runs in any QGIS Python without extra packages.
-Every failure (network, HTTP status, a body that is not JSON) is a GsgeoApiError whose
-message names the request and, when the server sent one, the server's own message.
+Requests go through QGIS's own network stack (QgsBlockingNetworkRequest), so QGIS's proxy,
+SSL and timeout settings apply as they do to the layers. Every failure (network, HTTP
+status, a body that is not JSON) is a GsgeoApiError whose message names the request and,
+when the server sent one, the server's own message.
 """
 
 from __future__ import annotations
 
 import json
-import urllib.error
 import urllib.parse
-import urllib.request
 from dataclasses import dataclass
 from typing import Any
 
-#: Seconds to wait for the server on one request.
-TIMEOUT_S = 30.0
+from qgis.core import QgsBlockingNetworkRequest
+from qgis.PyQt.QtCore import QByteArray, QUrl
+from qgis.PyQt.QtNetwork import QNetworkRequest
 
 
 class GsgeoApiError(Exception):
@@ -58,22 +58,30 @@ class GsgeoClient:
         self.connection = connection
 
     def request(self, method: str, path: str, body: Any = None) -> Any:
-        """``method`` ``path`` (from the server root, e.g. /api/projects) with a JSON body."""
+        """``method`` GET or POST ``path`` (from the server root, e.g. /api/projects) with
+        ``body`` as JSON (POST); the decoded JSON answer."""
+        if method not in ("GET", "POST"):
+            raise ValueError(f"method must be GET or POST, got {method}")
         url = self.connection.base + path
-        data = None if body is None else json.dumps(body).encode()
-        headers = {"Accept": "application/json", **self.connection.headers()}
-        if data is not None:
-            headers["Content-Type"] = "application/json"
-        req = urllib.request.Request(url, data=data, method=method, headers=headers)
-        try:
-            with urllib.request.urlopen(req, timeout=TIMEOUT_S) as resp:
-                raw = resp.read()
-        except urllib.error.HTTPError as exc:
-            raise GsgeoApiError(f"{method} {url}: HTTP {exc.code}: {server_message(exc)}",
-                                exc.code) from None
-        except (urllib.error.URLError, OSError) as exc:
-            reason = getattr(exc, "reason", exc)
-            raise GsgeoApiError(f"{method} {url}: the server does not answer ({reason})") from None
+        req = QNetworkRequest(QUrl(url))
+        req.setRawHeader(b"Accept", b"application/json")
+        for name, value in self.connection.headers().items():
+            req.setRawHeader(name.encode(), value.encode())
+        net = QgsBlockingNetworkRequest()
+        if method == "GET":
+            net.get(req, True)  # forceRefresh: never QGIS's cached copy
+        else:
+            req.setHeader(QNetworkRequest.KnownHeaders.ContentTypeHeader, "application/json")
+            net.post(req, QByteArray(json.dumps(body).encode()))
+        reply = net.reply()
+        status = reply.attribute(QNetworkRequest.Attribute.HttpStatusCodeAttribute)
+        raw = bytes(reply.content())
+        if status is None:  # no HTTP answer at all
+            raise GsgeoApiError(f"{method} {url}: the server does not answer "
+                                f"({net.errorMessage() or 'no reply'})")
+        if int(status) >= 400:
+            raise GsgeoApiError(f"{method} {url}: HTTP {int(status)}: "
+                                f"{server_message(raw, net.errorMessage())}", int(status))
         if not raw:
             return None
         try:
@@ -103,10 +111,10 @@ def quote(part: str) -> str:
     return urllib.parse.quote(part, safe="")
 
 
-def server_message(exc: urllib.error.HTTPError) -> str:
-    """The server's ``message`` (or ``detail``) from an error body, else the HTTP reason."""
+def server_message(raw: bytes, fallback: str) -> str:
+    """The server's ``message`` (or ``detail``) from an error body, else ``fallback``."""
     try:
-        body = json.loads(exc.read() or b"{}")
+        body = json.loads(raw or b"{}")
     except ValueError:
         body = {}
     if isinstance(body, dict):
@@ -114,4 +122,4 @@ def server_message(exc: urllib.error.HTTPError) -> str:
         if msg:
             field = body.get("field")
             return f"{msg} ({field})" if field else str(msg)
-    return str(exc.reason)
+    return fallback
