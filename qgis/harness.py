@@ -1,10 +1,11 @@
 """Headless driver of the plugin for tests: QGIS without a display, commands on stdin.
 
 Run with Debian's QGIS Python (``QT_QPA_PLATFORM=offscreen /usr/bin/python3
-qgis/harness.py``). It loads the plugin package ``gsgeo`` from this directory (through
-``classFactory``, as QGIS does) with a minimal stand-in for QGIS's interface, then reads one
-JSON command per line and answers each with one line ``@@ {json}`` on stdout (anything else
-on stdout is QGIS's own chatter). Commands (``cmd``):
+qgis/harness.py [PLUGINS_DIR]``). It loads the plugin package ``gsgeo`` from this directory
+(through ``classFactory``), or, given PLUGINS_DIR (an installed copy, e.g. the zip
+extracted), as QGIS starts installed plugins, with a minimal stand-in for QGIS's interface;
+then it reads one JSON command per line and answers each with one line ``@@ {json}`` on
+stdout (anything else on stdout is QGIS's own chatter). Commands (``cmd``):
 
 - ``connect`` {url, token}: the plugin's connect; answers the project ids.
 - ``add_layers`` {project}: choose the project and add its layers; answers ``layers``.
@@ -33,9 +34,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from qgis.core import (  # noqa: E402 (the plugin's directory must be on the path first)
+from qgis.core import (
     Qgis,
     QgsApplication,
     QgsCoordinateReferenceSystem,
@@ -45,8 +44,8 @@ from qgis.core import (  # noqa: E402 (the plugin's directory must be on the pat
     QgsProject,
     QgsVectorLayer,
 )
-from qgis.gui import QgsMapCanvas  # noqa: E402
-from qgis.PyQt.QtWidgets import QMainWindow, QToolBar  # noqa: E402
+from qgis.gui import QgsMapCanvas
+from qgis.PyQt.QtWidgets import QMainWindow, QToolBar
 
 
 class Iface:
@@ -245,18 +244,43 @@ def render_ellipse(major: float, minor: float, bearing: float) -> dict[str, Any]
             "major": float(along), "minor": float(across)}
 
 
+def load_plugin(iface: Iface, plugins_dir: str | None) -> tuple[Any, dict[str, Any]]:
+    """The plugin object, started. Without ``plugins_dir`` the package next to this file,
+    through its classFactory; with it, the way QGIS starts an installed plugin (qgis.utils
+    finds it in that plugins folder, reads metadata.txt, imports it, calls classFactory and
+    initGui). Also what was loaded from where."""
+    if plugins_dir is None:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import gsgeo
+
+        plugin = gsgeo.classFactory(iface)
+        plugin.initGui()
+        return plugin, {"module": gsgeo.__file__}
+    import qgis.utils as qu
+
+    qu.iface = iface
+    qu.plugin_paths = [plugins_dir]
+    sys.path.insert(0, plugins_dir)
+    qu.updateAvailablePlugins()
+    if "gsgeo" not in qu.available_plugins:
+        raise RuntimeError(f"QGIS finds no plugin gsgeo in {plugins_dir}")
+    if not qu.loadPlugin("gsgeo") or not qu.startPlugin("gsgeo"):
+        raise RuntimeError("QGIS could not load or start the plugin gsgeo")
+    return qu.plugins["gsgeo"], {
+        "module": sys.modules["gsgeo"].__file__,
+        "min_version": qu.pluginMetadata("gsgeo", "qgisMinimumVersion"),
+        "name": qu.pluginMetadata("gsgeo", "name")}
+
+
 def main() -> int:
     app = QgsApplication([], True)
     app.initQgis()
-    import gsgeo
-
     iface = Iface()
     iface.canvas.setDestinationCrs(QgsCoordinateReferenceSystem("EPSG:4326"))
-    plugin = gsgeo.classFactory(iface)
-    plugin.initGui()
+    plugin, loaded = load_plugin(iface, sys.argv[1] if len(sys.argv) > 1 else None)
     from qgis.core import QgsProviderRegistry
 
-    print("@@ " + json.dumps({"ready": True, "qgis": Qgis.QGIS_VERSION,
+    print("@@ " + json.dumps({"ready": True, "qgis": Qgis.QGIS_VERSION, **loaded,
                               "providers": QgsProviderRegistry.instance().providerList()}),
           flush=True)
     for line in sys.stdin:

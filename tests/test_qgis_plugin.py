@@ -97,14 +97,15 @@ def test_ruff_and_mypy_pass_on_the_plugin(tmp_path):
 class Harness:
     """qgis/harness.py under Debian's Python: one JSON command in, one ``@@`` line out."""
 
-    def __init__(self, home: Path):
+    def __init__(self, home: Path, plugins_dir: Path | None = None):
         home.mkdir(parents=True, exist_ok=True)
         env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "HOME": str(home),
                "QGIS_CUSTOM_CONFIG_PATH": str(home / "qgis-profile"),
                "XDG_RUNTIME_DIR": str(home)}
         env.pop("PYTHONPATH", None)
         self.log = (home / "harness.log").open("w")
-        self.proc = subprocess.Popen([QGIS_PYTHON, str(REPO / "qgis" / "harness.py")],
+        args = [str(plugins_dir)] if plugins_dir else []
+        self.proc = subprocess.Popen([QGIS_PYTHON, str(REPO / "qgis" / "harness.py"), *args],
                                      cwd=home, env=env, text=True, stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=self.log)
         self.lines: queue.Queue[str] = queue.Queue()
@@ -145,6 +146,27 @@ class Harness:
                 self.proc.kill()
                 self.proc.wait(10)
         self.log.close()
+
+
+def test_zip_installs_and_starts_in_qgis(tmp_path):
+    """The zip extracted into a plugins folder is found, loaded and started the way QGIS
+    starts installed plugins (qgis.utils), from that folder, and unloads cleanly."""
+    reason = qgis_missing()
+    if reason:
+        pytest.skip(reason)
+    out = tmp_path / "gsgeo-qgis.zip"
+    subprocess.run(["bash", "scripts/build_qgis_plugin.sh", str(out)], cwd=REPO, check=True,
+                   capture_output=True, timeout=60)
+    plugins = tmp_path / "profile" / "python" / "plugins"
+    with zipfile.ZipFile(out) as z:
+        z.extractall(plugins)
+    qgis = Harness(tmp_path / "home", plugins)
+    try:
+        assert qgis.hello["module"] == str(plugins / "gsgeo" / "__init__.py")
+        assert (qgis.hello["name"], qgis.hello["min_version"]) == ("gsgeo", "3.22")
+        assert qgis("unload") == {"actions": 0, "token_hook": False, "live": False}
+    finally:
+        qgis.close()
 
 
 def place(k: int) -> tuple[float, float, float]:
