@@ -3,8 +3,9 @@ refresh.
 
 Each layer remembers its server collection in the custom properties ``gsgeo/collection``
 and ``gsgeo/project`` (kept in saved QGIS projects), which is how refresh and "send as
-check points" find gsgeo layers. The layers are in CRS84 (lon, lat, WGS 84 ellipsoidal
-height), the OAPIF default, which QGIS 3.22 reads; QGIS reprojects them for the map.
+check points" find gsgeo layers. QGIS 3.22 reads the collections in CRS84 (lon, lat,
+WGS 84 ellipsoidal height); QGIS versions implementing OGC API - Features Part 2 read them
+in the storage CRS the server announces (the project's grid). QGIS reprojects either.
 """
 
 from __future__ import annotations
