@@ -110,7 +110,11 @@ class Harness:
                                      stdout=subprocess.PIPE, stderr=self.log)
         self.lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self.pump, daemon=True).start()
-        self.hello = self.answer()
+        try:
+            self.hello = self.answer()
+        except AssertionError:
+            self.close()
+            raise
 
     def pump(self) -> None:
         assert self.proc.stdout is not None
