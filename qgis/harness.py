@@ -125,7 +125,10 @@ def run(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
     if name == "add_layers":
         plugin.choose_project(cmd["project"])
         plugin.add_layers()
-        return {"layers": layers_of(cmd.get("to_crs")), "messages": iface.messages}
+        return {"layers": layers_of(cmd.get("to_crs")), "messages": iface.messages,
+                "project_crs": QgsProject.instance().crs().authid(),
+                "map_crs": iface.canvas.mapSettings().destinationCrs().authid(),
+                "map_extent": iface.canvas.extent().toRectF().getCoords()}
     if name == "refresh":
         n = plugin.refresh()
         return {"refreshed": n, "layers": layers_of(cmd.get("to_crs"))}

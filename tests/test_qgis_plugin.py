@@ -240,6 +240,11 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
         e, n = got[pt_id]["grid"]  # CRS84 taken into the grid by QGIS itself
         assert abs(e - rec["easting"]) < 1e-3 and abs(n - rec["northing"]) < 1e-3, (pt_id, rec)
 
+    # the empty map took the project's grid and shows its points
+    assert added["project_crs"] == added["map_crs"] == GRID
+    x0, y0, x1, y1 = added["map_extent"]
+    assert all(x0 < r["easting"] < x1 and y0 < r["northing"] < y1 for r in api.values()), added
+
     # live: a point stored now is in the layer after a refresh
     r = http.post(f"/api/projects/{pid}/points", json={"id": "P4", "rays": rays_at(ecef_of(*place(4)))})
     assert r.status_code == 201

@@ -16,6 +16,7 @@ from .checkpoints import layer_payload
 from .client import Connection, GsgeoApiError, GsgeoClient
 from .dialog import ConnectDialog
 from .layers import PROP_PROJECT, add_project_layers, refresh_layers
+from .mapframe import frame_map
 from .settings import load_connection, load_project, save_connection, save_project
 from .viewer import OpenViewerTool, viewer_url
 
@@ -128,7 +129,10 @@ class GsgeoPlugin:
             return []
         self.projects[self.project_id] = info
         title = f"gsgeo: {info.get('name') or self.project_id}"
+        empty_map = not QgsProject.instance().mapLayers()
         layers = add_project_layers(self.connection, collections, self.project_id, title)
+        if empty_map and layers:
+            frame_map(self.iface.mapCanvas(), info.get("crs"), layers)
         if not layers:
             self.say(f"The server lists no collections of project '{self.project_id}' "
                      "(is /ogc served?)", Qgis.MessageLevel.Warning)
