@@ -17,7 +17,9 @@ esac
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 apt_updated=0
 apt_install() {
-    echo "installing Debian's $* through apt" >&2
+    local pkgs=()
+    for a in "$@"; do [[ "$a" == -* ]] || pkgs+=("$a"); done
+    echo "installing Debian's ${pkgs[*]} through apt" >&2
     if [ "$apt_updated" = 0 ]; then as_root apt-get update -qq; apt_updated=1; fi
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$@" >/dev/null
 }
