@@ -7,6 +7,7 @@ check points); the live-write and token tests start their own.
 from __future__ import annotations
 
 import math
+import time
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from servertools import LONDON, ecef_of, rays_at, start_server
 
 from gsgeo.export.tables import CHECK_POINT_TYPES, LINE_TYPES, POLYGON_TYPES, RAY_TYPES
 from gsgeo.measure.schema import RECORD_KEYS
+from gsgeo.server.ogc.pages import PageCache
 from gsgeo.service import open_projects
 from gsgeo.service.checkpoints import CheckPointRow
 from gsgeo.store.base import PointFilter, Transaction
@@ -401,3 +403,55 @@ def test_store_pages_match_the_reference_filter(tmp_path):
             assert np.isfinite([r["lon"] for r in recs.values()]).all()
     finally:
         svc.store.close()
+
+
+# pages made ahead ------------------------------------------------------------------------
+def test_a_page_made_ahead_is_not_served_after_a_change(tmp_path):
+    """The next page is made while the client reads this one; a change committed in between
+    (through the API, on another connection) is in the answer all the same."""
+    data = tmp_path / "data"
+    make_project(data, "n", 4)
+    proc, base = start_server(data)
+    try:
+        first = httpx.get(f"{base}/ogc/collections/n.points/items?limit=2").json()
+        nxt = next(k["href"] for k in first["links"] if k["rel"] == "next")
+        time.sleep(0.5)  # the page after it is made by now
+        r = httpx.patch(f"{base}/api/projects/n/points/P3", json={"code": "renamed"})
+        assert r.status_code == 200
+        second = httpx.get(nxt).json()
+        assert [f["id"] for f in second["features"]] == ["P2", "P3"]
+        assert second["features"][1]["properties"]["code"] == "renamed"
+        # unchanged: the page made ahead is the one served, equal to a fresh one
+        again = httpx.get(f"{base}/ogc/collections/n.points/items?limit=2").json()
+        time.sleep(0.5)
+        made_ahead = httpx.get(nxt).json()
+        assert made_ahead["features"] == second["features"]
+        assert again["numberMatched"] == made_ahead["numberMatched"] == 4
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def test_page_cache_drops_a_page_of_an_older_revision():
+    rev = [1]
+    made = []
+    cache: PageCache[str] = PageCache(lambda: rev[0])
+
+    def make() -> str:
+        made.append(rev[0])
+        return f"page at {rev[0]}"
+
+    cache.make_ahead("k", make)
+    assert cache.take("k") == "page at 1"  # waits for the page being made
+    assert cache.take("k") is None  # taken once
+    cache.make_ahead("k", make)
+    cache.take("nothing")
+    time.sleep(0.2)
+    rev[0] = 2  # a change committed after the page was made
+    assert cache.take("k") is None
+    unknown: PageCache[str] = PageCache(lambda: None)  # a store that cannot tell
+    unknown.make_ahead("k", make)
+    time.sleep(0.2)
+    assert unknown.take("k") is None
+    cache.close()
+    unknown.close()

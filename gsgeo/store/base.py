@@ -150,6 +150,12 @@ class Store(ABC):
     @abstractmethod
     def close(self) -> None: ...
 
+    def revision(self) -> int | None:
+        """A number that changes whenever a change is committed to the store, by this
+        process or another; None when the backend cannot tell (callers then cache nothing
+        that is derived from stored data)."""
+        return None
+
     @abstractmethod
     def check_integrity(self) -> list[str]:
         """Problems found in the stored data (empty when sound)."""

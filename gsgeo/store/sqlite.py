@@ -334,6 +334,7 @@ class SQLiteStore(Store):
         self._connections: list[sqlite3.Connection] = []
         self._lock = threading.Lock()
         self._write_lock = threading.Lock()
+        self._watch: sqlite3.Connection | None = None  # for revision()
         self._migrate()
 
     def _connect(self) -> sqlite3.Connection:
@@ -388,6 +389,23 @@ class SQLiteStore(Store):
         except sqlite3.DatabaseError as exc:
             raise StoreError(f"cannot open as a gsgeo store: {exc}", source=str(self.path)) from None
 
+    def revision(self) -> int | None:
+        # SQLite's data_version changes when another connection (any thread or process)
+        # commits; this connection of its own never writes, so every commit counts.
+        with self._lock:
+            if self._watch is None:
+                try:
+                    self._watch = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000,
+                                                  isolation_level=None,
+                                                  check_same_thread=False)
+                except sqlite3.Error:
+                    return None
+                self._connections.append(self._watch)
+            try:
+                return int(self._watch.execute("PRAGMA data_version").fetchone()[0])
+            except sqlite3.Error:
+                return None
+
     @property
     def schema_version(self) -> int:
         return self._connect().execute("PRAGMA user_version").fetchone()[0]
@@ -437,6 +455,7 @@ class SQLiteStore(Store):
                 except sqlite3.Error:
                     pass
             self._connections.clear()
+            self._watch = None
         self._local = threading.local()
 
 

@@ -10,7 +10,9 @@ the body) and ``Last-Modified``; ``If-None-Match`` with the current ETag gets 30
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from email.utils import format_datetime
 from urllib.parse import urlencode
@@ -24,6 +26,7 @@ from gsgeo.errors import CRSError, InputError
 from gsgeo.jsontypes import JSONObject
 from gsgeo.server.ogc import html
 from gsgeo.server.ogc.openapi import OPENAPI_MEDIA, openapi_document
+from gsgeo.server.ogc.pages import PageCache
 from gsgeo.service.ogc import (
     DEFAULT_LIMIT,
     FILTERS,
@@ -281,17 +284,86 @@ def _http_date(iso: str) -> str:
     return format_datetime(t.astimezone(UTC).replace(microsecond=0), usegmt=True)
 
 
-def _cached(request: Request, body: bytes, media: str, page: ItemPage) -> Response:
+@dataclass(frozen=True)
+class Rendered:
+    """An answer's body with what its headers say, and the query of the page after it."""
+
+    body: bytes
+    media: str
+    crs_uri: str
+    last_modified: str
+    next_params: dict[str, str] | None = None
+
+
+def _rendered(body: bytes, media: str, page: ItemPage,
+              next_params: dict[str, str] | None = None) -> Rendered:
+    return Rendered(body, media, page.crs.uri, page.last_modified, next_params)
+
+
+def _cached(request: Request, got: Rendered) -> Response:
     """The answer with Content-Crs, ETag and Last-Modified; 304 when If-None-Match has it."""
+    body = got.body
     etag = '"' + hashlib.blake2b(body, digest_size=16).hexdigest() + '"'
-    headers = {"ETag": etag, "Last-Modified": _http_date(page.last_modified),
-               "Content-Crs": f"<{page.crs.uri}>", "Cache-Control": "no-cache"}
+    headers = {"ETag": etag, "Last-Modified": _http_date(got.last_modified),
+               "Content-Crs": f"<{got.crs_uri}>", "Cache-Control": "no-cache"}
     wanted = request.headers.get("if-none-match")
     if wanted is not None:
         tags = {t.strip().removeprefix("W/") for t in wanted.split(",")}
         if etag in tags or "*" in tags:
             return Response(status_code=304, headers=headers)
-    return Response(body, media_type=media, headers=headers)
+    return Response(body, media_type=got.media, headers=headers)
+
+
+_PAGES_LOCK = threading.Lock()
+
+
+def _pages(request: Request) -> PageCache[Rendered]:
+    """The application's pages made ahead (made at its first items request)."""
+    state = request.app.state
+    with _PAGES_LOCK:
+        cache = getattr(state, "ogc_pages", None)
+        if cache is None:
+            cache = state.ogc_pages = PageCache(state.projects.store.revision)
+    return cache
+
+
+def _render_items(svc: FeatureService, root: str, collection_id: str, params: dict[str, str],
+                  as_html: bool) -> Rendered:
+    """A page of items as the answer's body (GeoJSON or HTML), with next/prev links."""
+    q = _query(params)
+    page = svc.items(collection_id, q)
+    base = f"{root}/collections/{collection_id}/items"
+    keep = {k: v for k, v in params.items() if k not in ("f", "offset", "limit")}
+
+    def query(offset: int, fmt: str) -> dict[str, str]:
+        return {**keep, "f": fmt, "limit": str(q.limit), "offset": str(offset)}
+
+    def url(offset: int, fmt: str) -> str:
+        return base + "?" + urlencode(query(offset, fmt))
+
+    media = "text/html" if as_html else GEOJSON
+    fmt = "html" if as_html else "json"
+    links = [_link(url(q.offset, fmt), "self", media, "this page"),
+             _link(url(q.offset, "json" if as_html else "html"), "alternate",
+                   GEOJSON if as_html else "text/html", "this page in the other format"),
+             _link(f"{root}/collections/{collection_id}", "collection", JSON,
+                   "the collection")]
+    n = len(page.features)
+    after = None
+    if q.offset + n < page.number_matched:
+        links.append(_link(url(q.offset + n, fmt), "next", media, "next page"))
+        after = query(q.offset + n, fmt)
+    if q.offset > 0:
+        links.append(_link(url(max(0, q.offset - q.limit), fmt), "prev", media,
+                           "previous page"))
+    doc = {"type": "FeatureCollection", "features": page.features,
+           "numberMatched": page.number_matched, "numberReturned": n,
+           "timeStamp": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
+           "links": links}
+    if as_html:
+        return _rendered(html.items(doc, f"{collection_id}: features").encode(),
+                         "text/html; charset=utf-8", page, after)
+    return _rendered(orjson.dumps(doc), GEOJSON, page, after)
 
 
 @router.get("/collections/{collection_id}/items")
@@ -299,37 +371,19 @@ def items(request: Request, collection_id: str) -> Response:
     def make() -> Response:
         params = _params(request, ITEM_PARAMS)
         as_html = _wants_html(request, params)
-        q = _query(params)
-        page = _service(request).items(collection_id, q)
-        root = _root(request)
-        base = f"{root}/collections/{collection_id}/items"
-        keep = {k: v for k, v in params.items() if k not in ("f", "offset", "limit")}
-
-        def url(offset: int, fmt: str) -> str:
-            return base + "?" + urlencode({**keep, "f": fmt, "limit": q.limit, "offset": offset})
-
-        media = "text/html" if as_html else GEOJSON
-        fmt = "html" if as_html else "json"
-        links = [_link(url(q.offset, fmt), "self", media, "this page"),
-                 _link(url(q.offset, "json" if as_html else "html"), "alternate",
-                       GEOJSON if as_html else "text/html", "this page in the other format"),
-                 _link(f"{root}/collections/{collection_id}", "collection", JSON,
-                       "the collection")]
-        n = len(page.features)
-        if q.offset + n < page.number_matched:
-            links.append(_link(url(q.offset + n, fmt), "next", media, "next page"))
-        if q.offset > 0:
-            links.append(_link(url(max(0, q.offset - q.limit), fmt), "prev", media,
-                               "previous page"))
-        doc = {"type": "FeatureCollection", "features": page.features,
-               "numberMatched": page.number_matched, "numberReturned": n,
-               "timeStamp": datetime.now(UTC).isoformat(timespec="seconds").replace(
-                   "+00:00", "Z"),
-               "links": links}
+        _query(params)  # a bad parameter is refused before anything is read
+        svc, root = _service(request), _root(request)
         if as_html:
-            return _cached(request, html.items(doc, f"{collection_id}: features").encode(),
-                           "text/html; charset=utf-8", page)
-        return _cached(request, orjson.dumps(doc), GEOJSON, page)
+            return _cached(request, _render_items(svc, root, collection_id, params, True))
+        pages = _pages(request)
+        got = pages.take((root, collection_id, tuple(sorted(params.items()))))
+        if got is None:
+            got = _render_items(svc, root, collection_id, params, False)
+        nxt = got.next_params
+        if nxt is not None:  # made while the client reads this one
+            pages.make_ahead((root, collection_id, tuple(sorted(nxt.items()))),
+                             lambda: _render_items(svc, root, collection_id, nxt, False))
+        return _cached(request, got)
 
     return _answer(make)
 
@@ -347,8 +401,8 @@ def item(request: Request, collection_id: str, feature_id: str) -> Response:
                         _link(f"{root}/collections/{collection_id}", "collection", JSON,
                               "the collection")]
         if as_html:
-            return _cached(request, html.feature(doc).encode(), "text/html; charset=utf-8",
-                           page)
-        return _cached(request, orjson.dumps(doc), GEOJSON, page)
+            return _cached(request, _rendered(html.feature(doc).encode(),
+                                              "text/html; charset=utf-8", page))
+        return _cached(request, _rendered(orjson.dumps(doc), GEOJSON, page))
 
     return _answer(make)
