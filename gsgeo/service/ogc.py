@@ -64,6 +64,8 @@ EPSG_PREFIX = "http://www.opengis.net/def/crs/EPSG/0/"
 
 DEFAULT_LIMIT = 100
 MAX_LIMIT = 10_000
+#: The largest offset taken (a 64-bit SQLite integer holds it; no project comes near it).
+MAX_OFFSET = 2**53
 
 #: Properties a client may filter on (besides bbox and datetime), by layer.
 FILTERS = {"points": ("code",), "lines": (), "polygons": (), "check_points": (), "rays": ()}
@@ -180,13 +182,15 @@ def _instant(text: str, end: bool) -> datetime:
             t = datetime.combine(d, time(0), UTC)
             return t + timedelta(days=1, microseconds=-1) if end else t
         t = datetime.fromisoformat(text.replace("z", "Z").replace("t", "T"))
+        if t.tzinfo is not None:
+            return t.astimezone(UTC)
     except ValueError:
         raise InputError(f"{text[:80]!r} is not an RFC 3339 date-time such as "
                          "2026-11-24T15:00:00Z", field="datetime") from None
-    if t.tzinfo is None:
-        raise InputError(f"{text[:80]!r} has no time zone (RFC 3339 needs one, e.g. Z)",
-                         field="datetime")
-    return t
+    except OverflowError:  # e.g. year 9999 plus a day, year 1 minus an hour
+        raise InputError(f"{text[:80]!r} is out of the range of dates", field="datetime") from None
+    raise InputError(f"{text[:80]!r} has no time zone (RFC 3339 needs one, e.g. Z)",
+                     field="datetime")
 
 
 def parse_datetime(text: str) -> tuple[datetime | None, datetime | None]:

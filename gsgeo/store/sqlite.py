@@ -70,7 +70,7 @@ def _instant(t: datetime, up: bool) -> str:
     u = t.astimezone(UTC)
     rest = u.microsecond % 1000
     u -= timedelta(microseconds=rest)
-    if up and rest:
+    if up and rest and u.year < 9999:  # (nothing is measured in year 9999's last second)
         u += timedelta(milliseconds=1)
     return u.strftime("%Y-%m-%dT%H:%M:%S.") + f"{u.microsecond // 1000:03d}Z"
 

@@ -33,6 +33,7 @@ from gsgeo.service.ogc import (
     GEOMETRY,
     LAYERS,
     MAX_LIMIT,
+    MAX_OFFSET,
     TEMPORAL,
     TITLES,
     Collection,
@@ -247,7 +248,8 @@ def queryables(request: Request, collection_id: str) -> Response:
     return _answer(make)
 
 
-def _int(params: dict[str, str], name: str, default: int, low: int) -> int:
+def _int(params: dict[str, str], name: str, default: int, low: int, high: int | None = None
+         ) -> int:
     text = params.get(name)
     if text is None:
         return default
@@ -258,6 +260,8 @@ def _int(params: dict[str, str], name: str, default: int, low: int) -> int:
                        f"not {text[:40]!r}") from None
     if v < low:
         raise OgcError(400, "InvalidParameterValue", f"{name} must be at least {low}")
+    if high is not None and v > high:
+        raise OgcError(400, "InvalidParameterValue", f"{name} must be at most {high}")
     return v
 
 
@@ -267,7 +271,7 @@ def _query(params: dict[str, str]) -> ItemQuery:
         start, end = parse_datetime(params["datetime"])
     return ItemQuery(
         limit=min(_int(params, "limit", DEFAULT_LIMIT, 1), MAX_LIMIT),
-        offset=_int(params, "offset", 0, 0),
+        offset=_int(params, "offset", 0, 0, MAX_OFFSET),
         crs=params.get("crs"),
         bbox=parse_bbox(params["bbox"]) if "bbox" in params else None,
         bbox_crs=params.get("bbox-crs"),
