@@ -476,3 +476,20 @@ def test_no_query_gets_a_500(server, pairs, collection):
     assert r.status_code in (200, 400, 404), (pairs, r.text)
     if r.status_code != 200:
         assert r.json()["code"] in ("InvalidParameterValue", "NotFound")
+
+
+def test_a_project_without_a_grid_offers_crs84_only(server):
+    r = httpx.post(f"{server}/api/projects", json={"name": "no grid", "id": "nogrid"})
+    assert r.status_code in (200, 201), r.text
+    r = httpx.post(f"{server}/api/projects/nogrid/points", json={"id": "Q1", "rays": point_rays(2)})
+    assert r.status_code in (200, 201), r.text
+    c = httpx.get(f"{server}/ogc/collections/nogrid.points").json()
+    assert c["crs"] == [CRS84] and c["storageCrs"] == CRS84
+    doc = httpx.get(f"{server}/ogc/collections/nogrid.points/items").json()
+    rec = record(api_points(server, "nogrid")["Q1"])
+    assert doc["features"][0]["geometry"]["coordinates"] == [rec["lon"], rec["lat"], rec["h_wgs84"]]
+    assert doc["features"][0]["properties"]["easting"] is None
+    r = httpx.get(f"{server}/ogc/collections/nogrid.points/items", params={"crs": GRID})
+    assert r.status_code == 400 and "not offered" in r.json()["description"]
+    lines = httpx.get(f"{server}/ogc/collections/nogrid.rays/items").json()
+    assert lines["numberMatched"] == 0 and lines["features"] == []
