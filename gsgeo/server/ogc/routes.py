@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from email.utils import format_datetime
-from urllib.parse import urlencode
+from urllib.parse import quote, urlencode
 
 import orjson
 from fastapi import APIRouter, Request
@@ -360,10 +360,9 @@ def _render_items(svc: FeatureService, root: str, collection_id: str, params: di
     if q.offset > 0:
         links.append(_link(url(max(0, q.offset - q.limit), fmt), "prev", media,
                            "previous page"))
+    # no timeStamp (optional): the body, and so its ETag, changes only when the data does
     doc = {"type": "FeatureCollection", "features": page.features,
-           "numberMatched": page.number_matched, "numberReturned": n,
-           "timeStamp": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
-           "links": links}
+           "numberMatched": page.number_matched, "numberReturned": n, "links": links}
     if as_html:
         return _rendered(html.items(doc, f"{collection_id}: features").encode(),
                          "text/html; charset=utf-8", page, after)
@@ -399,7 +398,7 @@ def item(request: Request, collection_id: str, feature_id: str) -> Response:
         as_html = _wants_html(request, params)
         page = _service(request).item(collection_id, feature_id, params.get("crs"))
         root = _root(request)
-        base = f"{root}/collections/{collection_id}/items/{feature_id}"
+        base = f"{root}/collections/{collection_id}/items/{quote(feature_id, safe='~')}"
         doc = dict(page.features[0])
         doc["links"] = [*_self_links(base, as_html, GEOJSON),
                         _link(f"{root}/collections/{collection_id}", "collection", JSON,
