@@ -138,6 +138,11 @@ def test_a_point_stored_through_the_api_is_in_the_next_read(tmp_path):
         proc.wait(10)
 
 
+def test_gdal_attribute_filters_reach_the_server(server):
+    df = pyogrio.read_dataframe(oapif(server), layer="t.points", where="code = 'lamp'")
+    assert sorted(df["point_id"]) == ["P1", "P3"]
+
+
 def test_gdal_pages_through_next_links(server):
     df = pyogrio.read_dataframe(oapif(server), layer="t.points", PAGE_SIZE="2")
     assert sorted(df["point_id"]) == [f"P{i}" for i in range(5)]
@@ -228,6 +233,12 @@ def test_bbox_datetime_and_code_filters(server):
     day = p0["measured_at"][:10]
     assert len(ids(datetime=day)) == 5  # a date is the whole UTC day
     assert ids(code="lamp") == ["P1", "P3"]
+    assert len(ids(measured_at=f"{earlier}/{later}")) == 5
+    assert ids(measured_at=p0["measured_at"]) == ids(datetime=p0["measured_at"])
+    r = httpx.get(items, params={"measured_at": "soon"})
+    assert r.status_code == 400 and r.json()["description"].startswith("measured_at:")
+    r = httpx.get(items, params={"measured_at": later, "datetime": later})
+    assert r.status_code == 400 and "not both" in r.json()["description"]
     doc = httpx.get(items, params={"code": "tree", "limit": 1}).json()
     assert doc["numberMatched"] == 2 and doc["numberReturned"] == 1
     lbox = f"{p0['lon'] - 1e-5},{p0['lat'] - 1e-5},{p0['lon'] + 1e-5},{p0['lat'] + 1e-5}"

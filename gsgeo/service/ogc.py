@@ -173,7 +173,7 @@ def parse_bbox(text: str) -> tuple[float, float, float, float]:
     return x0, y0, x1, y1
 
 
-def _instant(text: str, end: bool) -> datetime:
+def _instant(text: str, end: bool, field: str) -> datetime:
     """An RFC 3339 date-time (with its offset) or a full date (the whole UTC day: its start,
     or with ``end`` its last microsecond)."""
     try:
@@ -186,28 +186,29 @@ def _instant(text: str, end: bool) -> datetime:
             return t.astimezone(UTC)
     except ValueError:
         raise InputError(f"{text[:80]!r} is not an RFC 3339 date-time such as "
-                         "2026-11-24T15:00:00Z", field="datetime") from None
+                         "2026-11-24T15:00:00Z", field=field) from None
     except OverflowError:  # e.g. year 9999 plus a day, year 1 minus an hour
-        raise InputError(f"{text[:80]!r} is out of the range of dates", field="datetime") from None
+        raise InputError(f"{text[:80]!r} is out of the range of dates", field=field) from None
     raise InputError(f"{text[:80]!r} has no time zone (RFC 3339 needs one, e.g. Z)",
-                     field="datetime")
+                     field=field)
 
 
-def parse_datetime(text: str) -> tuple[datetime | None, datetime | None]:
+def parse_datetime(text: str, field: str = "datetime"
+                   ) -> tuple[datetime | None, datetime | None]:
     """An RFC 3339 instant or interval ('a/b', '../b', 'a/..', open ends also empty) as an
     inclusive (start, end); an instant is both."""
     if "/" not in text:
-        return _instant(text, False), _instant(text, True)
+        return _instant(text, False, field), _instant(text, True, field)
     parts = text.split("/")
     if len(parts) != 2:
-        raise InputError("an interval has exactly one '/'", field="datetime")
+        raise InputError("an interval has exactly one '/'", field=field)
     a, b = (p.strip() for p in parts)
-    start = None if a in ("", "..") else _instant(a, False)
-    end = None if b in ("", "..") else _instant(b, True)
+    start = None if a in ("", "..") else _instant(a, False, field)
+    end = None if b in ("", "..") else _instant(b, True, field)
     if start is None and end is None:
-        raise InputError("an interval needs at least one end", field="datetime")
+        raise InputError("an interval needs at least one end", field=field)
     if start is not None and end is not None and start > end:
-        raise InputError("the interval ends before it starts", field="datetime")
+        raise InputError("the interval ends before it starts", field=field)
     return start, end
 
 

@@ -45,6 +45,7 @@ def openapi_document(root: str) -> JSONObject:
                {"type": "string", "format": "uri"}),
         _param("datetime", "RFC 3339 instant or interval (a/b, ../b, a/..) of measured_at",
                {"type": "string"}),
+        _param("measured_at", "the same as datetime (its queryable)", {"type": "string"}),
         _param("code", "points whose code equals this", {"type": "string"}),
     ]
     geojson = {"application/geo+json": {"schema": {"type": "object"}},

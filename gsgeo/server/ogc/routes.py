@@ -60,7 +60,10 @@ CONFORMANCE = [
     "http://www.opengis.net/spec/ogcapi-features-2/1.0/conf/crs",
 ]
 QUERYABLES_REL = "http://www.opengis.net/def/rel/ogc/1.0/queryables"
-ITEM_PARAMS = {"f", "limit", "offset", "bbox", "bbox-crs", "datetime", "crs", "code"}
+#: ``measured_at`` is the datetime filter named by its queryable (GDAL sends a filter on a
+#: queryable as ``name=value``).
+ITEM_PARAMS = {"f", "limit", "offset", "bbox", "bbox-crs", "datetime", "measured_at", "crs",
+               "code"}
 
 
 class OgcError(Exception):
@@ -267,8 +270,11 @@ def _int(params: dict[str, str], name: str, default: int, low: int, high: int | 
 
 def _query(params: dict[str, str]) -> ItemQuery:
     start = end = None
-    if "datetime" in params:
-        start, end = parse_datetime(params["datetime"])
+    if "datetime" in params and "measured_at" in params:
+        raise OgcError(400, "InvalidParameterValue", "give datetime or measured_at, not both")
+    for name in ("datetime", "measured_at"):
+        if name in params:
+            start, end = parse_datetime(params[name], name)
     return ItemQuery(
         limit=min(_int(params, "limit", DEFAULT_LIMIT, 1), MAX_LIMIT),
         offset=_int(params, "offset", 0, 0, MAX_OFFSET),
