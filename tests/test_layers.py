@@ -108,6 +108,10 @@ def test_report_renders_data_and_sits_below_the_service():
                                       "gsgeo.georef")) == []
 
 
+def test_the_server_reaches_the_store_only_through_the_service():
+    assert offenders("gsgeo.server", ("gsgeo.store",)) == []
+
+
 def test_store_is_persistence_only():
     assert offenders("gsgeo.store", ("gsgeo.export", "gsgeo.measure", "gsgeo.service",
                                      "gsgeo.server", "gsgeo.commands", "gsgeo.session",

@@ -27,6 +27,7 @@ from gsgeo.jsontypes import JSONObject
 from gsgeo.server.ogc import html
 from gsgeo.server.ogc.openapi import OPENAPI_MEDIA, openapi_document
 from gsgeo.server.ogc.pages import PageCache
+from gsgeo.service import NotFoundError
 from gsgeo.service.ogc import (
     DEFAULT_LIMIT,
     FILTERS,
@@ -45,7 +46,6 @@ from gsgeo.service.ogc import (
     parse_datetime,
     storage_crs,
 )
-from gsgeo.store.records import NotFoundError
 
 router = APIRouter(prefix="/ogc", include_in_schema=False)
 
