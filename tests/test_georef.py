@@ -255,7 +255,7 @@ def test_a_store_failure_puts_the_tileset_back(small_site, monkeypatch):
     def broken(*_args, **_kw):
         raise OSError("disk full")
 
-    monkeypatch.setattr(SQLiteTransaction, "update_point", broken)
+    monkeypatch.setattr(SQLiteTransaction, "update_results", broken)
     with pytest.raises(OSError):
         svc.georeference("s", apply=True)
     monkeypatch.undo()

@@ -317,3 +317,22 @@ def test_a_new_migration_upgrades_an_existing_store_in_place(tmp_path, monkeypat
     con = sqlite3.connect(tmp_path / DB_NAME)
     assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION + 1
     con.close()
+
+
+def test_update_results_writes_the_measured_state_only(store):
+    with store.transaction() as tx:
+        tx.insert_project(Project(id="p", name="p"))
+        tx.insert_point(PointRecord(project_id="p", id="A", rays=[{"origin": [1, 2, 3],
+                                    "direction": [0, 0, 1]}] * 2, code="c", error="e"))
+    with store.transaction() as tx:
+        pt = tx.list_points("p", results=False)[0]
+        pt.code = "changed in memory only"
+        pt.result, pt.error, pt.solved_rev = {"point_id": "A", "x": float("nan")}, None, 7
+        pt.frame = {"version": 2, "root_transform": [1.0] * 16}
+        tx.update_results([pt])
+    with store.transaction(write=False) as tx:
+        got = tx.get_point("p", "A")
+    assert got is not None and got.code == "c" and got.error is None and got.solved_rev == 7
+    assert got.result == {"point_id": "A", "x": None}  # non-finite numbers stored as null
+    assert got.frame == {"version": 2, "root_transform": [1.0] * 16}
+    assert got.rays[0]["origin"] == [1, 2, 3]

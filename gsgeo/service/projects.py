@@ -230,8 +230,7 @@ class Projects:
                 for pt in pts:
                     pt.frame = None
                 self._measure_many(pts, p, scene_frame(self.data_dir, p.scene))
-                for pt in pts:
-                    tx.update_point(pt)
+                tx.update_results(pts)
             if any(k in changes for k in SETTINGS):
                 new = p.settings() | {k: changes[k] for k in SETTINGS if k in changes}
                 if new.get("sigma_px") is None:
@@ -259,8 +258,7 @@ class Projects:
         ctx = scene_frame(self.data_dir, p.scene)
         pts = tx.list_points(p.id, results=False)  # all measured again below
         self._measure_many(pts, p, ctx)
-        for pt in pts:
-            tx.update_point(pt)
+        tx.update_results(pts)
 
     def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None) -> None:
         """Re-measure stored points with the settings of ``p`` in the scene frame ``ctx``, all
@@ -731,8 +729,7 @@ class Projects:
                 if pt.frame is None:
                     pt.frame = dict(pinned)
             self._measure_many(pts, q, ctx)
-            for pt in pts:
-                tx.update_point(pt)
+            tx.update_results(pts)
             n += len(pts)
         return n
 

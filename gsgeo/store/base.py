@@ -96,6 +96,12 @@ class Transaction(ABC):
     @abstractmethod
     def update_point(self, point: PointRecord, old_id: str | None = None) -> None:
         """Write ``point``; ``old_id`` is its previous id when it is being renamed."""
+    def update_results(self, points: list[PointRecord]) -> None:
+        """Write the measured state (result, error, solved_rev, frame) of many points at once,
+        e.g. after a re-measure; their other fields are as stored. Backends may do it in bulk."""
+        for pt in points:
+            self.update_point(pt)
+
     @abstractmethod
     def delete_point(self, pid: str, point_id: str) -> bool: ...
 

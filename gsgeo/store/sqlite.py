@@ -236,6 +236,17 @@ class SQLiteTransaction(Transaction):
                 raise ConflictError(f"point '{p.id}' already exists") from None
             raise
 
+    def update_results(self, points: list[PointRecord]) -> None:
+        now = now_iso()
+        for p in points:
+            p.updated_at = now
+        self.con.executemany(
+            "UPDATE points SET result=?, error=?, solved_rev=?, frame=?, updated_at=?"
+            " WHERE project_id=? AND id=?",
+            [(None if p.result is None else _dumps(p.result), p.error, p.solved_rev,
+              None if p.frame is None else _dumps(p.frame), now, p.project_id, p.id)
+             for p in points])
+
     def delete_point(self, pid: str, point_id: str) -> bool:
         cur = self.con.execute("DELETE FROM points WHERE project_id = ? AND id = ?", (pid, point_id))
         return cur.rowcount > 0
