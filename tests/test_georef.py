@@ -20,6 +20,7 @@ from tiles_helpers import match, random_splats
 
 from gsgeo.crs.ellipsoid import geodetic_to_ecef_closed_form
 from gsgeo.crs.grid import to_grid_many
+from gsgeo.crs.modelmatrix import rendered_to_georeferenced
 from gsgeo.errors import GeometryError, InputError
 from gsgeo.georef.control import control_ecef, grid_to_ecef
 from gsgeo.georef.helmert import Similarity, fit_similarity, rotation_from_vector
@@ -311,3 +312,45 @@ def test_moving_a_project_to_another_scene_forgets_its_frames(small_site):
     for pid, p in before.items():
         assert moved[pid].frame is None
         assert np.linalg.norm(np.array(moved[pid].result["point_ecef"]) - p) < 1e-6
+
+
+def test_stored_rays_many_equals_the_point_by_point_path():
+    """The stacked reading of stored rays (re-measure after a georeference change) gives what
+    stored_rays(rays).mapped(carry) gives, point by point; unusual points keep their errors."""
+    from gsgeo.service.measuring import stored_rays, stored_rays_many
+
+    rng = np.random.default_rng(5)
+    x = geodetic_to_ecef_closed_form(-1.3, 51.7, 80.0)
+    up = x / np.linalg.norm(x)
+    sim = Similarity(2.5, rotation_from_vector([0.2, -0.1, 0.4]), np.array([10.0, -4.0, 2.0]))
+    turn = Similarity(1.0, rotation_from_vector([0.0, 0.0, 0.3]), np.array([5.0, 0, 0]))
+    points, carries = [], []
+    for k in range(12):
+        rays = aim(rng, x + rng.normal(0, 5, 3), up, 10.0, n=2 + k % 4)
+        if k % 3 == 1:  # under a viewer modelMatrix that is a similarity
+            for r in rays:
+                r["model_matrix"] = turn.matrix().T.reshape(-1).tolist()
+                r["pixel"], r["viewport"] = [10.0, 20.0], [800.0, 600.0]
+        points.append(rays)
+        carries.append(sim.matrix() if k % 2 else None)
+    want = [stored_rays(p) if c is None else stored_rays(p).mapped(c)
+            for p, c in zip(points, carries, strict=True)]
+
+    def georeferenced(r):  # a modelMatrix may be applied on the way in: the same rays
+        o, d, _ = rendered_to_georeferenced(r.origins, r.directions,
+                                            [r.model_matrix(i) for i in range(len(r))])
+        return o, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    bad = aim(rng, x, up, 10.0)
+    bad[1]["direction"] = [0.0, 0.0, 0.0]
+    fast = stored_rays_many(points, carries)
+    assert all(r.model_matrices is None for r in fast)  # the stacked path ran
+    mixed = stored_rays_many(points + [bad], carries + [None])  # point by point
+    assert isinstance(mixed[-1], InputError) and "rays[1].direction" in str(mixed[-1])
+    for got in (fast, mixed[:-1]):
+        for g, w in zip(got, want, strict=True):
+            (go, gd), (wo, wd) = georeferenced(g), georeferenced(w)
+            assert np.abs(go - wo).max() < 1e-6 and np.abs(gd - wd).max() < 1e-12
+            assert np.array_equal(g.ifov, w.ifov)
+            for a, b in ((g.pixels, w.pixels), (g.viewports, w.viewports)):
+                assert (a is None) == (b is None) and (a is None or np.array_equal(a, b))

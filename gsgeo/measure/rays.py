@@ -129,6 +129,40 @@ class Rays:
         return not any(a is not None and np.isinf(a).any() for a in (px, vp))
 
     @classmethod
+    def split(cls, origins: ArrayLike, directions: ArrayLike, counts: Sequence[int],
+              ifov: ArrayLike | None = None, pixels: ArrayLike | None = None,
+              viewports: ArrayLike | None = None) -> list[Rays] | None:
+        """Many points' rays from stacked arrays: R = sum(counts) rows of origins, directions
+        (R, 3), ifov (R,), pixels, viewports (R, 2), NaN where a ray has no such member; no
+        model matrices. Checked on the whole stack at once; None when any row is out of range
+        (build those points one by one to have the problem named)."""
+        o = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+        d = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+        r = o.shape[0]
+        f = None if ifov is None else np.asarray(ifov, dtype=np.float64).reshape(r)
+        px = None if pixels is None else np.asarray(pixels, dtype=np.float64).reshape(r, 2)
+        vp = None if viewports is None else np.asarray(viewports, dtype=np.float64).reshape(r, 2)
+        ends = np.cumsum(np.asarray(counts, dtype=np.int64))
+        if d.shape[0] != r or (ends.size and ends[-1] != r) or \
+                not cls._plainly_valid(o, d, f, px, vp, None):
+            return None
+        out: list[Rays] = []
+        for a, b in zip(np.concatenate([[0], ends[:-1]]), ends, strict=True):
+            item = object.__new__(cls)
+            for name, arr in (("origins", o), ("directions", d), ("ifov", f),
+                              ("pixels", px), ("viewports", vp)):
+                part = None if arr is None else arr[a:b]
+                if part is not None and name != "origins" and name != "directions" \
+                        and np.isnan(part).all():
+                    part = None
+                if part is not None:
+                    part.setflags(write=False)
+                object.__setattr__(item, name, part)
+            object.__setattr__(item, "model_matrices", None)
+            out.append(item)
+        return out
+
+    @classmethod
     def from_columns(cls, origins: Sequence[ArrayLike], directions: Sequence[ArrayLike],
                      ifov: Sequence[float | None] | None = None,
                      pixels: Sequence[ArrayLike | None] | None = None,

@@ -50,7 +50,9 @@ from gsgeo.service.measuring import (
     measured_result,
     solve_settings,
     stored_rays,
+    stored_rays_many,
     with_record,
+    without_cyclic_gc,
 )
 from gsgeo.service.points import PointInput, check_ray_count, georef_version, point_input, rays_input
 from gsgeo.service.validate import item_id, sigma_px, slug
@@ -226,11 +228,8 @@ class Projects:
             if moved:
                 # frames of another scene mean nothing here: the rays are taken as given in
                 # the new scene's current frame, with its georeference's uncertainty
-                pts = tx.list_points(p.id, results=False)
-                for pt in pts:
-                    pt.frame = None
-                self._measure_many(pts, p, scene_frame(self.data_dir, p.scene))
-                tx.update_results(pts)
+                self._remeasure_stored(tx, p, scene_frame(self.data_dir, p.scene),
+                                       forget_frames=True)
             if any(k in changes for k in SETTINGS):
                 new = p.settings() | {k: changes[k] for k in SETTINGS if k in changes}
                 if new.get("sigma_px") is None:
@@ -255,10 +254,23 @@ class Projects:
             return p
 
     def _remeasure_all(self, tx: Transaction, p: Project) -> None:
-        ctx = scene_frame(self.data_dir, p.scene)
-        pts = tx.list_points(p.id, results=False)  # all measured again below
-        self._measure_many(pts, p, ctx)
-        tx.update_results(pts)
+        self._remeasure_stored(tx, p, scene_frame(self.data_dir, p.scene))
+
+    def _remeasure_stored(self, tx: Transaction, p: Project, ctx: SceneFrame | None, *,
+                          pin: JSONObject | None = None, forget_frames: bool = False) -> int:
+        """Measure every stored point of ``p`` again in the scene frame ``ctx`` and write the
+        results; ``pin`` is the frame of points that record none, ``forget_frames`` drops
+        every point's frame (a project moved to another scene). Returns the number of points."""
+        with without_cyclic_gc():
+            pts = tx.list_points(p.id, results=False)  # all measured again below
+            for pt in pts:
+                if forget_frames:
+                    pt.frame = None
+                elif pt.frame is None and pin is not None:
+                    pt.frame = dict(pin)
+            self._measure_many(pts, p, ctx)
+            tx.update_results(pts)
+        return len(pts)
 
     def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None) -> None:
         """Re-measure stored points with the settings of ``p`` in the scene frame ``ctx``, all
@@ -266,18 +278,20 @@ class Projects:
         gives); a point that fails keeps the reason."""
         typed: list[tuple[PointRecord, Rays]] = []
         carries: dict[tuple[float, ...], FloatArray | None] = {}  # one per distinct frame
+        point_carry: list[FloatArray | None] = []
         for pt in pts:
             pt.solved_rev = p.settings_rev
-            try:
-                rays = stored_rays(pt.rays)
-                root = () if pt.frame is None else tuple(pt.frame.get("root_transform") or ())
-                if root not in carries:
-                    carries[root] = carry(pt.frame, ctx)
-                m = carries[root]
-                typed.append((pt, rays if m is None else rays.mapped(m)))
-            except GsgeoError as exc:
+            root = () if pt.frame is None else tuple(pt.frame.get("root_transform") or ())
+            if root not in carries:
+                carries[root] = carry(pt.frame, ctx)
+            point_carry.append(carries[root])
+        for pt, rays in zip(pts, stored_rays_many([q.rays for q in pts], point_carry),
+                            strict=True):
+            if isinstance(rays, Rays):
+                typed.append((pt, rays))
+            else:
                 pt.result = pt.record = None
-                pt.error = str(exc)
+                pt.error = str(rays)
         if not typed:
             return
         try:
@@ -719,19 +733,10 @@ class Projects:
         """Re-measure every point of every project on ``scene`` in the scene's new frame;
         points without a recorded frame are pinned to the one ``before`` the change."""
         ctx = scene_frame(self.data_dir, scene)
-        pinned = {"version": before.version, "root_transform": column_major(before.root)}
-        n = 0
-        for q in tx.list_projects():
-            if q.scene != scene:
-                continue
-            pts = tx.list_points(q.id, results=False)  # all measured again below
-            for pt in pts:
-                if pt.frame is None:
-                    pt.frame = dict(pinned)
-            self._measure_many(pts, q, ctx)
-            tx.update_results(pts)
-            n += len(pts)
-        return n
+        pinned: JSONObject = {"version": before.version,
+                              "root_transform": column_major(before.root)}
+        return sum(self._remeasure_stored(tx, q, ctx, pin=pinned)
+                   for q in tx.list_projects() if q.scene == scene)
 
     # check points ---------------------------------------------------------------------
     def list_check_points(self, pid: str) -> list[CheckPointRecord]:
