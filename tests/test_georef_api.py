@@ -187,6 +187,7 @@ def test_session_mode_applies_to_a_scene_folder_and_undoes(session_files):
     out = _run(d / "s.json", "--control", d / "control.csv", "--control-crs", "EPSG:4979",
                "--apply", scene, "--json")
     assert out.returncode == 0, out.stderr
+    assert any("re-measured" in w for w in json.loads(out.stdout)["warnings"])
     got = json.loads((scene / "tileset.json").read_text())
     assert got["extras"]["gsgeo"]["georef"]["version"] == 1
     assert got["root"]["transform"] != doc["root"]["transform"]

@@ -170,6 +170,10 @@ def _session_mode(args: argparse.Namespace) -> JSONObject:
         report["applied"] = True
         report["scene"] = {"name": scene.name, "version": new.version,
                            "root_transform": new.root_transform.T.reshape(-1).tolist()}
+        report["warnings"] = list(report.get("warnings") or []) + [
+            "projects stored on this scene keep their results until they are re-measured "
+            "(POST /api/projects/{pid}/resolve, or a change of their settings): their rays "
+            "then follow the new georeference"]
     return report
 
 
