@@ -354,3 +354,20 @@ def test_stored_rays_many_equals_the_point_by_point_path():
             assert np.array_equal(g.ifov, w.ifov)
             for a, b in ((g.pixels, w.pixels), (g.viewports, w.viewports)):
                 assert (a is None) == (b is None) and (a is None or np.array_equal(a, b))
+
+
+def test_a_georeference_applied_without_the_store_is_caught_up_on_the_next_read(small_site):
+    """gsgeo georef SESSION --apply (or a crash between tileset.json and the store) moves the
+    scene without the project: its next read re-measures, so no point stays in the old frame."""
+    from gsgeo.tiles.georefhistory import apply_similarity
+
+    svc, data, *_ = small_site
+    before = {q.id: np.array(q.result["point_ecef"]) for q in svc.list_points("s")}
+    sim = Similarity(1.5, rotation_from_vector([0.0, 0.1, 0.2]), np.array([3.0, 2.0, 1.0]))
+    apply_similarity(data / "scenes" / "s", sim.matrix(), kind="similarity",
+                     frame_covariance=None, summary=None)
+    after = {q.id: np.array(q.result["point_ecef"]) for q in svc.list_points("s")}
+    for pid, p in before.items():
+        assert np.linalg.norm(after[pid] - sim.apply(p)) < 1e-6
+    assert svc.get_project("s").scene_version == 1
+    assert svc.follow_scene("s") is False  # nothing more to do

@@ -251,6 +251,8 @@ class FeatureService:
     def items(self, cid: str, q: ItemQuery) -> ItemPage:
         """One page of a collection's features matching ``q``."""
         c = self.collection(cid)
+        if self.projects.follow_scene(c.project.id):  # the scene moved without the store
+            c = self.collection(cid)
         out = pick_crs(c.project, q.crs, "crs")
         if q.code is not None and "code" not in FILTERS[c.layer]:
             raise InputError(f"collection '{cid}' cannot be filtered by code", field="code")
@@ -288,6 +290,8 @@ class FeatureService:
     def item(self, cid: str, fid: str, crs: str | None = None) -> ItemPage:
         """One feature (a page of one); NotFoundError when the collection has no ``fid``."""
         c = self.collection(cid)
+        if self.projects.follow_scene(c.project.id):
+            c = self.collection(cid)
         out = pick_crs(c.project, crs, "crs")
         with self.projects.store.transaction(write=False) as tx:
             if c.layer == "points":

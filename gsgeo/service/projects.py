@@ -166,6 +166,7 @@ class Projects:
             return self._project(tx, pid)
 
     def project_summary(self, pid: str) -> JSONObject:
+        self.follow_scene(pid)
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
             pts = tx.list_points(pid)
@@ -191,9 +192,11 @@ class Projects:
             scene = self._check_scene(scene)
         s = validate_settings({k: settings.get(k) for k in SETTINGS if k in settings} |
                               {"sigma_px": settings.get("sigma_px", 1.0)}, self.data_dir)
+        ctx = scene_frame(self.data_dir, scene)
         p = Project(id=pid, name=name, description=_text(description, "description"),
                     scene=scene, crs=s["crs"], vertical=s["vertical"], geoid=s["geoid"],
-                    source_crs=s["source_crs"], sigma_px=s["sigma_px"])
+                    source_crs=s["source_crs"], sigma_px=s["sigma_px"],
+                    scene_version=None if ctx is None else ctx.version)
         with self.store.transaction() as tx:
             tx.insert_project(p)
         return p
@@ -270,6 +273,7 @@ class Projects:
                     pt.frame = dict(pin)
             self._measure_many(pts, p, ctx)
             tx.update_results(pts)
+        p.scene_version = None if ctx is None else ctx.version
         return len(pts)
 
     def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None) -> None:
@@ -348,11 +352,13 @@ class Projects:
 
     def list_points(self, pid: str) -> list[PointRecord]:
         """The project's points (each record derived from its result as it is read)."""
+        self.follow_scene(pid)
         with self.store.transaction(write=False) as tx:
             self._project(tx, pid)
             return tx.list_points(pid)
 
     def get_point(self, pid: str, point_id: str) -> PointRecord:
+        self.follow_scene(pid)
         with self.store.transaction(write=False) as tx:
             return self._point(tx, pid, point_id)
 
@@ -619,6 +625,7 @@ class Projects:
     def georeference_status(self, pid: str) -> JSONObject:
         """The project's scene georeference (version, history, the applied fit) and its
         control points with whether each is measured."""
+        self.follow_scene(pid)
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
             cps = [c for c in tx.list_check_points(pid) if c.role == "control"]
@@ -663,6 +670,7 @@ class Projects:
         ``distances``, its scale alone) and, with ``apply``, write it into the scene's root
         transform and re-measure every point of every project on that scene, all in one
         transaction (the tileset is put back if the store cannot follow)."""
+        self.follow_scene(pid)
         if not apply:
             with self.store.transaction(write=False) as tx:
                 p = self._project(tx, pid)
@@ -735,8 +743,31 @@ class Projects:
         ctx = scene_frame(self.data_dir, scene)
         pinned: JSONObject = {"version": before.version,
                               "root_transform": column_major(before.root)}
-        return sum(self._remeasure_stored(tx, q, ctx, pin=pinned)
-                   for q in tx.list_projects() if q.scene == scene)
+        n = 0
+        for q in tx.list_projects():
+            if q.scene == scene:
+                n += self._remeasure_stored(tx, q, ctx, pin=pinned)
+                tx.update_project(q)  # its scene_version
+        return n
+
+    def follow_scene(self, pid: str) -> bool:
+        """Re-measure project ``pid`` if its scene's georeference changed without the store
+        following (a session's ``gsgeo georef --apply``, a crash between writing tileset.json
+        and committing the store, a hand edit): rays then follow the current frame. Cheap when
+        nothing changed (a stat of tileset.json). Returns whether it re-measured."""
+        with self.store.transaction(write=False) as tx:
+            p = self._project(tx, pid)
+        ctx = scene_frame(self.data_dir, p.scene)
+        if ctx is None or p.scene_version is None or p.scene_version == ctx.version:
+            return False
+        with self.store.transaction() as tx:
+            p = self._project(tx, pid)
+            ctx = scene_frame(self.data_dir, p.scene)
+            if ctx is None or p.scene_version is None or p.scene_version == ctx.version:
+                return False  # another request caught up meanwhile
+            self._remeasure_stored(tx, p, ctx)
+            tx.update_project(p)
+        return True
 
     # check points ---------------------------------------------------------------------
     def list_check_points(self, pid: str) -> list[CheckPointRecord]:
@@ -802,6 +833,7 @@ class Projects:
 
     def accuracy(self, pid: str, role: str = "check") -> JSONObject:
         """Measured minus check point coordinates in the project's grid, matched by id."""
+        self.follow_scene(pid)
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
             pts = tx.list_points(pid)

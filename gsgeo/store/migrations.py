@@ -103,6 +103,12 @@ MIGRATIONS: list[str] = [
     ALTER TABLE check_points ADD COLUMN sigma_h REAL CHECK (sigma_h IS NULL OR sigma_h > 0);
     ALTER TABLE check_points ADD COLUMN sigma_v REAL CHECK (sigma_v IS NULL OR sigma_v > 0);
     """,
+    # 4: the scene georeference version a project's points were last measured in (NULL: not
+    # known), so that a change made without the store (a session's gsgeo georef --apply, a
+    # crash between tileset.json and the store) is caught up on the project's next read
+    """
+    ALTER TABLE projects ADD COLUMN scene_version INTEGER;
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

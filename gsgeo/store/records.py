@@ -43,6 +43,8 @@ class Project:
     settings_rev: int = 0
     created_at: str = ""
     updated_at: str = ""
+    # the scene georeference version its points were last measured in (None: not known)
+    scene_version: int | None = None
 
     def settings(self) -> JSONObject:
         """The settings a point is solved with."""

@@ -133,7 +133,8 @@ class SQLiteTransaction(Transaction):
                        scene=row["scene"], crs=row["crs"], vertical=row["vertical"],
                        geoid=row["geoid"], source_crs=row["source_crs"],
                        sigma_px=row["sigma_px"], settings_rev=row["settings_rev"],
-                       created_at=row["created_at"], updated_at=row["updated_at"])
+                       created_at=row["created_at"], updated_at=row["updated_at"],
+                       scene_version=row["scene_version"])
 
     def list_projects(self) -> list[Project]:
         return [self._project(r) for r in self._all("SELECT * FROM projects ORDER BY created_at, id")]
@@ -146,9 +147,10 @@ class SQLiteTransaction(Transaction):
         p.created_at = p.updated_at = now_iso()
         self._insert(
             "INSERT INTO projects (id, name, description, scene, crs, vertical, geoid, source_crs,"
-            " sigma_px, settings_rev, created_at, updated_at) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            " sigma_px, settings_rev, created_at, updated_at, scene_version)"
+            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (p.id, p.name, p.description, p.scene, p.crs, p.vertical, p.geoid, p.source_crs,
-             p.sigma_px, p.settings_rev, p.created_at, p.updated_at),
+             p.sigma_px, p.settings_rev, p.created_at, p.updated_at, p.scene_version),
             f"project '{p.id}'",
         )
 
@@ -156,9 +158,9 @@ class SQLiteTransaction(Transaction):
         p.updated_at = now_iso()
         self.con.execute(
             "UPDATE projects SET name=?, description=?, scene=?, crs=?, vertical=?, geoid=?,"
-            " source_crs=?, sigma_px=?, settings_rev=?, updated_at=? WHERE id=?",
+            " source_crs=?, sigma_px=?, settings_rev=?, updated_at=?, scene_version=? WHERE id=?",
             (p.name, p.description, p.scene, p.crs, p.vertical, p.geoid, p.source_crs,
-             p.sigma_px, p.settings_rev, p.updated_at, p.id),
+             p.sigma_px, p.settings_rev, p.updated_at, p.scene_version, p.id),
         )
 
     def delete_project(self, pid: str) -> bool:
