@@ -171,9 +171,8 @@ def _session_mode(args: argparse.Namespace) -> JSONObject:
         report["scene"] = {"name": scene.name, "version": new.version,
                            "root_transform": new.root_transform.T.reshape(-1).tolist()}
         report["warnings"] = list(report.get("warnings") or []) + [
-            "projects stored on this scene keep their results until they are re-measured "
-            "(POST /api/projects/{pid}/resolve, or a change of their settings): their rays "
-            "then follow the new georeference"]
+            "projects stored on this scene are re-measured on their next read (their rays "
+            "follow the new georeference)"]
     return report
 
 
