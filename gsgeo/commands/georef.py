@@ -86,8 +86,9 @@ def _distances(texts: list[str]) -> list[Any]:
     return out
 
 
-def _read_points(path: str, crs: str | None, role: str) -> Any:
-    from gsgeo.georef.fit import Reference
+def _read_points(path: str, crs: str | None, role: str) -> list[Any]:
+    """The points of a control or check file as records in their CRS, with ``role``."""
+    from gsgeo.service import CheckPointRecord
     from gsgeo.service.checkpoints import format_from_name, read_check_points
 
     fmt = format_from_name(path)
@@ -104,24 +105,18 @@ def _read_points(path: str, crs: str | None, role: str) -> Any:
     crs = crs or file_crs or ("EPSG:4979" if fmt == "geojson" else None)
     if crs is None:
         raise InputError(f"{path}: state the CRS of its coordinates with --{role}-crs")
-
-    def num(v: float | None) -> float:
-        return np.nan if v is None else float(v)
-
-    return Reference([r.id for r in rows],
-                     np.array([[r.x, r.y, num(r.z)] for r in rows], dtype=float),
-                     [crs] * len(rows), np.array([num(r.sigma_h) for r in rows]),
-                     np.array([num(r.sigma_v) for r in rows]), [role] * len(rows))
+    return [CheckPointRecord("", r.id, r.x, r.y, r.z, crs, role, path, sigma_h=r.sigma_h,
+                             sigma_v=r.sigma_v) for r in rows]
 
 
-def _join(a: Any, b: Any | None) -> Any:
-    from gsgeo.georef.fit import Reference
+def _reference(args: argparse.Namespace) -> Any:
+    """The --control file's points (and the --check file's) as the fit takes them."""
+    from gsgeo.service.georeferencing import reference_from
 
-    if b is None:
-        return a
-    return Reference(a.ids + b.ids, np.vstack([a.xyz, b.xyz]), a.crss + b.crss,
-                     np.concatenate([a.sigma_h, b.sigma_h]),
-                     np.concatenate([a.sigma_v, b.sigma_v]), a.roles + b.roles)
+    records = _read_points(args.control, args.control_crs, "control")
+    if args.check:
+        records += _read_points(args.check, args.check_crs, "check")
+    return reference_from(records)
 
 
 def _session_mode(args: argparse.Namespace) -> JSONObject:
@@ -150,8 +145,7 @@ def _session_mode(args: argparse.Namespace) -> JSONObject:
     else:
         if not args.control:
             raise InputError("give the control points with --control FILE")
-        ref = _join(_read_points(args.control, args.control_crs, "control"),
-                    _read_points(args.check, args.check_crs, "check") if args.check else None)
+        ref = _reference(args)
         settings = SolveSettings.parse(crs=args.crs or session.crs,
                                        vertical=args.vertical or session.vertical,
                                        geoid=args.geoid,
@@ -196,8 +190,7 @@ def _project_mode(args: argparse.Namespace) -> JSONObject:
         if args.control and not args.scale_only:
             from gsgeo.service.georeferencing import measured_from
 
-            ref = _join(_read_points(args.control, args.control_crs, "control"),
-                        _read_points(args.check, args.check_crs, "check") if args.check else None)
+            ref = _reference(args)
             if args.apply is not None:
                 raise InputError("--apply with --project uses the project's stored control; "
                                  "import the file as control points first (viewer or API)")

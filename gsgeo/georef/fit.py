@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -71,15 +71,13 @@ class Measured:
 
 @dataclass
 class GeorefSolution:
-    """The chosen fit (every control point not excluded), the alternative without flagged
-    outliers, and the JSON report."""
+    """The chosen fit (every control point not excluded), its frame covariance and the JSON
+    report (flagged outliers, the fit without them, warnings)."""
 
     similarity: Similarity
     frame: FrameCovariance
     fit: SimilarityFit
-    outliers: list[str]
     report: JSONObject
-    warnings: list[str] = field(default_factory=list)
 
 
 def _rmse(d: FloatArray) -> JSONObject | None:
@@ -224,7 +222,7 @@ def georeference(measured: Measured, reference: Reference, settings: SolveSettin
             f"{alpha:g}): check them; exclude them or accept them explicitly"]
     frame = FrameCovariance(fit.centre, fit.covariance)
     report["frame_covariance"] = frame.to_json()
-    return GeorefSolution(fit.similarity, frame, fit, flagged, report, warnings)
+    return GeorefSolution(fit.similarity, frame, fit, report)
 
 
 def _summary(f: SimilarityFit, kind: str) -> JSONObject:

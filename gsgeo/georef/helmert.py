@@ -143,11 +143,6 @@ class SimilarityFit:
     def rotation_sigma_rad(self) -> FloatArray:
         return np.sqrt(np.clip(np.diag(self.covariance)[3:6], 0.0, None))
 
-    def point_sigma(self, y: ArrayLike) -> FloatArray:
-        """(3,) ECEF sigmas (m) of the mapped position y of a fixed point: the frame alone."""
-        j = frame_jacobian(np.asarray(y, dtype=np.float64).reshape(1, 3), self.centre)[0]
-        return np.sqrt(np.clip(np.diag(j @ self.covariance @ j.T), 0.0, None))
-
 
 def check_layout(dst: FloatArray, what: str = "control points") -> None:
     """GeometryError unless there are >= 3 points not on one line."""

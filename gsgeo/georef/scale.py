@@ -56,7 +56,9 @@ def fit_scale(measured: Measured, distances: Sequence[Distance],
                          field="distances")
     at = measured.index()
     o = np.asarray(origin_ecef, dtype=np.float64).reshape(3)
-    ratios, variances, rows = [], [], []
+    ratios: list[float] = []
+    variances: list[float] = []
+    measured_d: list[tuple[Distance, float, float]] = []
     warnings: list[str] = []
     for k, dist in enumerate(distances):
         where = f"distances[{k}]"
@@ -84,14 +86,13 @@ def fit_scale(measured: Measured, distances: Sequence[Distance],
         r = dist.distance / d
         ratios.append(r)
         variances.append((sig**2 + r**2 * var_d) / d**2)
-        rows.append({"from": dist.a, "to": dist.b, "distance": dist.distance,
-                     "measured": d, "sigma": sig})
+        measured_d.append((dist, d, sig))
     w = 1.0 / np.asarray(variances)
     s = float(np.sum(w * np.asarray(ratios)) / np.sum(w))
     s_sigma = float(1.0 / math.sqrt(np.sum(w)))
-    for row in rows:
-        row["scaled"] = s * float(row["measured"])  # type: ignore[arg-type]
-        row["residual"] = float(row["scaled"]) - float(row["distance"])  # type: ignore[arg-type]
+    rows: list[JSONObject] = [
+        {"from": dist.a, "to": dist.b, "distance": dist.distance, "measured": d, "sigma": sig,
+         "scaled": s * d, "residual": s * d - dist.distance} for dist, d, sig in measured_d]
     dof = len(rows) - 1
     vtpv = float(np.sum(w * (np.asarray(ratios) - s) ** 2))
     sim = Similarity(s, np.eye(3), o - s * o)

@@ -221,18 +221,9 @@ class Rays:
         d2 = d @ lin.T
         d2 /= np.linalg.norm(d2, axis=1, keepdims=True)
         o2 = o @ lin.T + s[:3, 3]
-        if not (np.isfinite(o2).all() and np.isfinite(d2).all()
-                and np.all(np.hypot.reduce(o2, axis=1) <= limits.MAX_ORIGIN_M)):
-            return Rays(o2, d2, self.ifov, self.pixels, self.viewports, None)  # names it
-        # the rest was checked when these rays were made: unit directions, the same ifov
-        out = object.__new__(Rays)
-        for name, value in (("origins", o2), ("directions", d2), ("ifov", self.ifov),
-                            ("pixels", self.pixels), ("viewports", self.viewports),
-                            ("model_matrices", None)):
-            if isinstance(value, np.ndarray):
-                value.setflags(write=False)
-            object.__setattr__(out, name, value)
-        return out
+        split = Rays.split(o2, d2, [len(self)], self.ifov, self.pixels, self.viewports)
+        # out of range after the carry: the constructor names the ray
+        return split[0] if split else Rays(o2, d2, self.ifov, self.pixels, self.viewports)
 
     def to_json(self) -> list[JSONObject]:
         """The session-JSON ray objects (README, "Session JSON"), members only where given."""

@@ -20,7 +20,7 @@ import numpy as np
 from gsgeo.crs.modelmatrix import column_major, matrix4
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.georef.fit import Measured, Reference
-from gsgeo.jsontypes import JSON, JSONObject
+from gsgeo.jsontypes import JSONObject
 from gsgeo.measure import Rays
 from gsgeo.measure.framecov import FrameCovariance
 from gsgeo.solve.linalg import FloatArray
@@ -130,15 +130,6 @@ def reference_from(cps: Sequence[CheckPointRecord]) -> Reference:
         sigma_h=np.array([num(c.sigma_h) for c in cps], dtype=float),
         sigma_v=np.array([num(c.sigma_v) for c in cps], dtype=float),
         roles=[c.role for c in cps])
-
-
-def exclude_ids(value: JSON, field: str = "exclude") -> list[str]:
-    """A list of control ids to leave out of the fit."""
-    if value is None:
-        return []
-    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-        raise InputError("expected a list of control point ids", field=field)
-    return [str(v) for v in value]
 
 
 def restore_on_failure(path: Path, before: bytes, exc: BaseException) -> None:

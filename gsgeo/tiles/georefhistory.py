@@ -32,6 +32,7 @@ import numpy as np
 from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form
 from gsgeo.crs.modelmatrix import column_major, matrix4
 from gsgeo.errors import InputError
+from gsgeo.tiles.tileset import read_tileset_json
 
 #: Within this many degrees of latitude 0, longitude 0 a scene counts as placed at the
 #: default origin (not on the Earth).
@@ -75,11 +76,6 @@ class SceneGeoref:
         v = self.version if version is None else version
         return next((h for h in self.history if h.get("version") == v), None)
 
-    def to_json(self) -> dict[str, Any]:
-        return {"version": self.version, "georeferenced": self.georeferenced,
-                "kind": self.kind, "root_transform": column_major(self.root_transform),
-                "frame_covariance": self.frame_covariance, "history": self.history}
-
 
 def _dict(value: Any) -> dict[str, Any]:
     """``value`` when it is a JSON object, else a new empty one."""
@@ -92,14 +88,9 @@ def _tileset_path(scene: str | os.PathLike[str]) -> Path:
 
 
 def _read(path: Path) -> dict[str, Any]:
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such tileset") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: not a readable tileset.json ({exc})") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("root"), dict):
-        raise InputError(f"{path}: not a 3D Tiles tileset (no 'root')")
+    doc = read_tileset_json(path)
+    if not isinstance(doc["root"], dict):
+        raise InputError(f"{path}: the root tile must be a JSON object")
     return doc
 
 

@@ -44,7 +44,7 @@ X_UP_TO_Z_UP = np.array([[0, 0, -1.0, 0], [0, 1.0, 0, 0], [1.0, 0, 0, 0], [0, 0,
 MAX_NESTING = 32
 
 __all__ = ["MAX_NESTING", "X_UP_TO_Z_UP", "Y_UP_TO_Z_UP", "GltfContent", "Tile", "Tileset",
-           "read_content", "read_gltf_json", "up_axis_turn"]
+           "read_content", "read_gltf_json", "read_tileset_json", "up_axis_turn"]
 
 
 def up_axis_turn(asset: dict) -> np.ndarray:
@@ -192,7 +192,7 @@ class Tileset:
         p = Path(path)
         if p.is_dir():
             p = p / "tileset.json"
-        doc = _read_tileset_json(p)
+        doc = read_tileset_json(p)
         self.path = p
         self.doc = doc
         asset = doc.get("asset", {})
@@ -218,7 +218,7 @@ class Tileset:
             ext = base / u
             if ext.resolve() in chain or len(chain) >= MAX_NESTING:
                 raise InputError(f"{ext}: external tilesets refer to each other in a loop")
-            doc = _read_tileset_json(ext)
+            doc = read_tileset_json(ext)
             tile.children.append(self._tile(doc["root"], m, f"{where}/{u}", level, ext.parent,
                                             up_axis_turn(doc.get("asset", {})),
                                             chain + (ext.resolve(),)))
@@ -319,7 +319,9 @@ class Tileset:
                 "h": (float(h.min()), float(h.max()))}
 
 
-def _read_tileset_json(p: Path) -> dict:
+def read_tileset_json(p: Path) -> dict:
+    """The JSON document of a tileset.json; InputError when missing, unreadable or without
+    a root."""
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
