@@ -1,4 +1,5 @@
-"""Persistence of projects, points (rays + measured result), lines, polygons and check points.
+"""Persistence of projects, points (rays + measured result), lines, polygons, buildings and
+check points.
 
 The storage backend sits behind :class:`~gsgeo.store.base.Store`; the embedded default is
 one SQLite file in the data directory (:func:`open_store`). Records only: validation and
@@ -7,6 +8,7 @@ measuring are gsgeo.service's (which imports this package, never the other way r
 
 from gsgeo.store.base import Store, Transaction
 from gsgeo.store.records import (
+    BuildingRecord,
     CheckPointRecord,
     ConflictError,
     FeatureRecord,
@@ -18,6 +20,7 @@ from gsgeo.store.sqlite import DB_NAME, SQLiteStore, StoreError, open_store
 
 __all__ = [
     "DB_NAME",
+    "BuildingRecord",
     "CheckPointRecord",
     "ConflictError",
     "FeatureRecord",

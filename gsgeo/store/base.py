@@ -14,7 +14,13 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from gsgeo.jsontypes import JSONObject
-from gsgeo.store.records import CheckPointRecord, FeatureRecord, PointRecord, Project
+from gsgeo.store.records import (
+    BuildingRecord,
+    CheckPointRecord,
+    FeatureRecord,
+    PointRecord,
+    Project,
+)
 
 
 @dataclass(frozen=True)
@@ -134,6 +140,20 @@ class Transaction(ABC):
     def update_feature(self, feature: FeatureRecord, old_id: str | None = None) -> None: ...
     @abstractmethod
     def delete_feature(self, pid: str, kind: str, fid: str) -> bool: ...
+
+    # buildings
+    @abstractmethod
+    def list_buildings(self, pid: str) -> list[BuildingRecord]:
+        """The project's buildings in creation order."""
+    @abstractmethod
+    def get_building(self, pid: str, bid: str) -> BuildingRecord | None: ...
+    @abstractmethod
+    def insert_building(self, building: BuildingRecord) -> None: ...
+    @abstractmethod
+    def update_building(self, building: BuildingRecord, old_id: str | None = None) -> None:
+        """Write ``building``; ``old_id`` is its previous id when it is being renamed."""
+    @abstractmethod
+    def delete_building(self, pid: str, bid: str) -> bool: ...
 
     # check points
     @abstractmethod

@@ -109,6 +109,20 @@ MIGRATIONS: list[str] = [
     """
     ALTER TABLE projects ADD COLUMN scene_version INTEGER;
     """,
+    # 5: LoD2 buildings: the session-JSON form of each (roof faces as point ids, ground,
+    # attributes); its model is derived from the points' current results when read, so it
+    # follows every re-measure of them and is never stored beside them
+    """
+    CREATE TABLE buildings (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        id TEXT NOT NULL,
+        seq INTEGER NOT NULL,
+        spec TEXT NOT NULL CHECK (json_valid(spec)),
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        PRIMARY KEY (project_id, id)
+    );
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -16,7 +16,7 @@ from gsgeo.pointschema import record_of
 
 
 class NotFoundError(GsgeoError, LookupError):
-    """A project, point, line, polygon or check point does not exist (HTTP 404)."""
+    """A project, point, line, polygon, building or check point does not exist (HTTP 404)."""
 
 
 class ConflictError(InputError):
@@ -90,6 +90,19 @@ class FeatureRecord:
     point_ids: list[str]
     code: str = ""
     description: str = ""
+    seq: int = 0
+    created_at: str = ""
+    updated_at: str = ""
+
+
+@dataclass
+class BuildingRecord:
+    """An LoD2 building as given: its session-JSON form (``spec``: id, roofs as rings of point
+    ids, ground, attributes, regularise). Its model is derived from the points when read."""
+
+    project_id: str
+    id: str
+    spec: JSONObject
     seq: int = 0
     created_at: str = ""
     updated_at: str = ""

@@ -24,6 +24,7 @@ from gsgeo.pointschema import RECORD_KEYS
 from gsgeo.store.base import PointFilter, PointRow, Store, Transaction
 from gsgeo.store.migrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.records import (
+    BuildingRecord,
     CheckPointRecord,
     ConflictError,
     FeatureRecord,
@@ -300,6 +301,48 @@ class SQLiteTransaction(Transaction):
     def delete_feature(self, pid: str, kind: str, fid: str) -> bool:
         cur = self.con.execute("DELETE FROM features WHERE project_id = ? AND kind = ? AND id = ?",
                                (pid, kind, fid))
+        return cur.rowcount > 0
+
+    # buildings ------------------------------------------------------------------------
+    @staticmethod
+    def _building(row: sqlite3.Row) -> BuildingRecord:
+        return BuildingRecord(project_id=row["project_id"], id=row["id"], seq=row["seq"],
+                              spec=orjson.loads(row["spec"]), created_at=row["created_at"],
+                              updated_at=row["updated_at"])
+
+    def list_buildings(self, pid: str) -> list[BuildingRecord]:
+        rows = self._all("SELECT * FROM buildings WHERE project_id = ? ORDER BY seq", (pid,))
+        return [self._building(r) for r in rows]
+
+    def get_building(self, pid: str, bid: str) -> BuildingRecord | None:
+        row = self._one("SELECT * FROM buildings WHERE project_id = ? AND id = ?", (pid, bid))
+        return None if row is None else self._building(row)
+
+    def insert_building(self, b: BuildingRecord) -> None:
+        b.created_at = b.updated_at = now_iso()
+        b.seq = self._next_seq("SELECT COALESCE(MAX(seq), 0) + 1 FROM buildings"
+                               " WHERE project_id = ?", (b.project_id,))
+        self._insert(
+            "INSERT INTO buildings (project_id, id, seq, spec, created_at, updated_at)"
+            " VALUES (?,?,?,?,?,?)",
+            (b.project_id, b.id, b.seq, _dumps(b.spec), b.created_at, b.updated_at),
+            f"building '{b.id}'",
+        )
+
+    def update_building(self, b: BuildingRecord, old_id: str | None = None) -> None:
+        b.updated_at = now_iso()
+        try:
+            self.con.execute(
+                "UPDATE buildings SET id=?, spec=?, updated_at=? WHERE project_id=? AND id=?",
+                (b.id, _dumps(b.spec), b.updated_at, b.project_id, old_id or b.id))
+        except sqlite3.IntegrityError as exc:
+            if "UNIQUE" in str(exc) or "PRIMARY KEY" in str(exc):
+                raise ConflictError(f"building '{b.id}' already exists") from None
+            raise
+
+    def delete_building(self, pid: str, bid: str) -> bool:
+        cur = self.con.execute("DELETE FROM buildings WHERE project_id = ? AND id = ?",
+                               (pid, bid))
         return cur.rowcount > 0
 
     # check points ---------------------------------------------------------------------
