@@ -72,6 +72,7 @@ def offenders(source: str, forbidden: tuple[str, ...], allowed: tuple[str, ...] 
 
 
 LAYERS = ("gsgeo.solve", "gsgeo.crs", "gsgeo.measure", "gsgeo.session", "gsgeo.export",
+          "gsgeo.buildings",
           "gsgeo.georef", "gsgeo.report", "gsgeo.tiles", "gsgeo.store", "gsgeo.service",
           "gsgeo.server", "gsgeo.commands", "gsgeo.demo", "gsgeo.cli")
 
@@ -106,6 +107,14 @@ def test_report_renders_data_and_sits_below_the_service():
                                       "gsgeo.cli", "gsgeo.store", "gsgeo.session",
                                       "gsgeo.export", "gsgeo.tiles", "gsgeo.demo",
                                       "gsgeo.georef")) == []
+
+
+def test_buildings_sit_beside_export_and_use_only_the_maths_below():
+    """gsgeo.buildings (LoD2 models, CityJSON) uses solve, crs and measure, never what is above."""
+    assert offenders("gsgeo.buildings", ("gsgeo.session", "gsgeo.store", "gsgeo.export",
+                                         "gsgeo.tiles", "gsgeo.server", "gsgeo.service",
+                                         "gsgeo.commands", "gsgeo.demo", "gsgeo.cli",
+                                         "gsgeo.georef", "gsgeo.report")) == []
 
 
 def test_the_server_reaches_the_store_only_through_the_service():

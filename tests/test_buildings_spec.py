@@ -1,0 +1,76 @@
+"""The building JSON form: parsed, written back, and every problem named."""
+
+from __future__ import annotations
+
+import pytest
+
+from gsgeo.buildings.spec import Ground, building_to_json, parse_building, point_ids
+from gsgeo.errors import InputError
+
+DOC = {"id": "B1", "roofs": [["E1", "E2", "R2", "R1"], ["E3", "E4", "R1", "R2"]],
+       "ground": 10.0, "attributes": {"function": "residential"},
+       "regularise": ["horizontal_eaves"]}
+
+
+@pytest.mark.parametrize("ground, expected", [
+    (10.0, Ground(height=10.0)),
+    ("G7", Ground(point_id="G7")),
+    ({"dtm": "dtm.tif"}, Ground(dtm="dtm.tif")),
+    ({"height": 9.5, "sigma": 0.05}, Ground(height=9.5, sigma=0.05)),
+    ({"point": "G1", "sigma": 0.02}, Ground(point_id="G1", sigma=0.02)),
+])
+def test_every_ground_form_round_trips(ground, expected):
+    spec = parse_building({**DOC, "ground": ground})
+    assert spec.ground == expected
+    assert parse_building(building_to_json(spec)) == spec
+
+
+def test_a_building_round_trips_with_its_attributes_and_walls():
+    doc = {**DOC, "walls": [["E1", "E2", "R2"]]}
+    spec = parse_building(doc)
+    assert spec.roofs[1] == ("E3", "E4", "R1", "R2")
+    assert spec.regularise == ("horizontal_eaves",)
+    assert building_to_json(spec) == doc
+    assert point_ids(parse_building({**DOC, "ground": "G7"})) == [
+        "E1", "E2", "R2", "R1", "E3", "E4", "G7"]
+
+
+def test_every_problem_is_named_at_once():
+    doc = {"id": "", "roofs": [["A", "B"], ["A", "B", "A", "C"], "x"], "ground": {"height": 1, "dtm": "d"},
+           "regularise": ["square"], "colour": 1}
+    with pytest.raises(InputError) as err:
+        parse_building(doc, "buildings[3]")
+    text = str(err.value)
+    for needle in ("buildings[3].colour: unknown key", "buildings[3].id: must not be empty",
+                   "buildings[3].roofs[0]: a face needs at least 3 point ids",
+                   "buildings[3].roofs[1]: point 'A' appears more than once",
+                   "buildings[3].roofs[2]: expected a list of point ids",
+                   "give exactly one of 'height', 'point', 'dtm'",
+                   "buildings[3].regularise[0]: unknown regularisation 'square'"):
+        assert needle in text, needle
+    assert err.value.field == "buildings[3]"
+
+
+@pytest.mark.parametrize("doc, field, needle", [
+    ([1], "building", "expected an object"),
+    ({"id": "B", "ground": 1}, "building.roofs", "missing"),
+    ({"id": "B", "roofs": [], "ground": 1}, "building.roofs", "at least 1 roof faces"),
+    ({"id": "B", "roofs": [["a", "b", "c", "a"]], "ground": 1}, "building.roofs[0]",
+     "repeats its first point"),
+    ({"id": "B", "roofs": [["a", "b", "c"]]}, "building.ground", "missing"),
+    ({"id": "B", "roofs": [["a", "b", "c"]], "ground": True}, "building.ground",
+     "expected a height"),
+    ({"id": "B", "roofs": [["a", "b", "c"]], "ground": {"height": 1, "sigma": -1}},
+     "building.ground.sigma", "must not be negative"),
+    ({"id": "B", "roofs": [["a", "b", "c"]], "ground": 1, "attributes": {"volume": 3}},
+     "building.attributes.volume", "computed by gsgeo"),
+    ({"id": "B", "roofs": [["a", "b", "c"]], "ground": 1, "walls": [["a", "b", "x"]]},
+     "building.walls[0]", "point 'x' is on no roof face"),
+    ({"id": "B", "roofs": [["a", "b", "c"]], "ground": 1,
+      "regularise": ["rectangular", "rectangular"]}, "building.regularise[1]", "given twice"),
+])
+def test_one_problem_names_its_field(doc, field, needle):
+    with pytest.raises(InputError) as err:
+        parse_building(doc)
+    assert err.value.field == field
+    assert needle in err.value.problem
