@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import orjson
 import pyproj
 import pytest
 import rasterio
@@ -20,7 +21,7 @@ from crs_helpers import camera_origins, model_matrix, noisy_directions
 import gsgeo.measure.batch as batch
 from gsgeo.crs.frames import EnuFrame, geodetic_to_ecef
 from gsgeo.errors import DatumError, InputError
-from gsgeo.measure.batch import measure_batch, snoop_many
+from gsgeo.measure.batch import measure_batch, measure_batch_json, snoop_many
 from gsgeo.measure.framecov import FrameCovariance
 from gsgeo.measure.point import measure_point, measure_points
 from gsgeo.measure.rays import Rays, SolveSettings
@@ -442,3 +443,46 @@ def test_a_crs_problem_of_the_whole_set_is_raised_once_as_measure_points_does():
     assert measure_batch([], settings) == []
     with pytest.raises(InputError, match="needs a grid CRS"):  # checked before any point
         measure_batch(points, SolveSettings(vertical="EPSG:5701"))
+
+
+def as_stored(value):
+    """A result as the store keeps it: orjson's JSON (NaN -> null), read back."""
+    return orjson.loads(orjson.dumps(value, option=orjson.OPT_SERIALIZE_NUMPY))
+
+
+@pytest.mark.parametrize("settings", [
+    SolveSettings(crs="EPSG:27700"),
+    SolveSettings(crs=None, sigma_px=0.7),
+    SolveSettings(crs="EPSG:27700", frame=FRAME),
+    SolveSettings(crs="EPSG:27700", sigma_px=0.0),  # the unweighted model: no pixel residuals
+], ids=["bng", "no-grid", "bng-frame-covariance", "unweighted"])
+def test_json_results_are_the_measurements_to_dict(settings):
+    """measure_batch_json (what a re-measure stores) makes, without Measurement objects, what
+    measure_batch's Measurements' to_dict() give: same keys in the same order, same values
+    (measured_at aside), failures and points off the vectorised path included."""
+    rng = np.random.default_rng(21)
+    points = make_points(rng, 80, rays=(2, 6))
+    for k in range(0, 80, 7):  # exclusions
+        pid, code, desc, rays, _ = points[k]
+        if len(rays) > 2:
+            points[k] = (pid, code, desc, rays, (k % len(rays),))
+    pid, code, desc, rays, _ = points[3]
+    points[3] = (pid, code, desc, rays, tuple(range(len(rays) - 1)))  # refused: one ray left
+    pid, code, desc, rays, _ = points[5]
+    f = np.full(len(rays), IFOV)
+    f[0] = np.nan
+    points[5] = (pid, code, desc, Rays(rays.origins, rays.directions, f), ())  # measure_point
+    got = measure_batch_json(points, settings)
+    ref = measure_batch(points, settings)
+    assert len(got) == len(ref) == 80
+    for g, r in zip(got, ref, strict=True):
+        if isinstance(r, MeasurementFailure):
+            assert g == r
+            continue
+        assert isinstance(g, dict)
+        a, b = as_stored(g), as_stored(r.to_dict())
+        a.pop("measured_at")
+        b.pop("measured_at")
+        assert list(a) == list(b)
+        assert a == b, r.point_id
+    assert sum(isinstance(r, MeasurementFailure) for r in ref) >= 1

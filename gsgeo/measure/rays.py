@@ -136,28 +136,36 @@ class Rays:
         (R, 3), ifov (R,), pixels, viewports (R, 2), NaN where a ray has no such member; no
         model matrices. Checked on the whole stack at once; None when any row is out of range
         (build those points one by one to have the problem named)."""
-        o = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
-        d = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+        # copies, made read-only whole: every point's rows are views of them
+        o = np.array(origins, dtype=np.float64).reshape(-1, 3)
+        d = np.array(directions, dtype=np.float64).reshape(-1, 3)
         r = o.shape[0]
-        f = None if ifov is None else np.asarray(ifov, dtype=np.float64).reshape(r)
-        px = None if pixels is None else np.asarray(pixels, dtype=np.float64).reshape(r, 2)
-        vp = None if viewports is None else np.asarray(viewports, dtype=np.float64).reshape(r, 2)
-        ends = np.cumsum(np.asarray(counts, dtype=np.int64))
+        f = None if ifov is None else np.array(ifov, dtype=np.float64).reshape(r)
+        px = None if pixels is None else np.array(pixels, dtype=np.float64).reshape(r, 2)
+        vp = None if viewports is None else np.array(viewports, dtype=np.float64).reshape(r, 2)
+        n = np.asarray(counts, dtype=np.int64)
+        ends = np.cumsum(n)
         if d.shape[0] != r or (ends.size and ends[-1] != r) or \
                 not cls._plainly_valid(o, d, f, px, vp, None):
             return None
+        starts = ends - n
+        columns: list[tuple[str, np.ndarray | None, list[bool]]] = []
+        for name, arr in (("origins", o), ("directions", d), ("ifov", f), ("pixels", px),
+                          ("viewports", vp)):
+            if arr is not None:
+                arr.setflags(write=False)
+            if arr is None or name in ("origins", "directions"):
+                given = [arr is not None] * n.size
+            else:  # an optional member all NaN in a point is absent there (None)
+                rows = ~np.isnan(arr).reshape(r, -1).all(axis=1)
+                cum = np.concatenate([[0], np.cumsum(rows)])
+                given = (cum[ends] > cum[starts]).tolist()
+            columns.append((name, arr, given))
         out: list[Rays] = []
-        for a, b in zip(np.concatenate([[0], ends[:-1]]), ends, strict=True):
+        for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
             item = object.__new__(cls)
-            for name, arr in (("origins", o), ("directions", d), ("ifov", f),
-                              ("pixels", px), ("viewports", vp)):
-                part = None if arr is None else arr[a:b]
-                if part is not None and name != "origins" and name != "directions" \
-                        and np.isnan(part).all():
-                    part = None
-                if part is not None:
-                    part.setflags(write=False)
-                object.__setattr__(item, name, part)
+            for name, arr, given in columns:
+                object.__setattr__(item, name, arr[a:b] if given[k] and arr is not None else None)
             object.__setattr__(item, "model_matrices", None)
             out.append(item)
         return out

@@ -19,11 +19,18 @@ from gsgeo.pointschema import RECORD_KEYS, record_of
 from gsgeo.solve import IntersectionResult
 from gsgeo.solve.linalg import FloatArray
 
-__all__ = ["RECORD_KEYS", "Measurement", "MeasurementFailure", "now_utc", "record_of"]
+__all__ = ["RECORD_KEYS", "Measurement", "MeasurementFailure", "largest", "now_utc", "record_of"]
 
 def now_utc() -> str:
     """The current time, ISO 8601 UTC to the second ('2026-11-24T15:00:00Z')."""
     return datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
+
+
+def largest(values: list[float]) -> float:
+    """max() of a few floats as np.max gives it (NaN when any is NaN), without numpy's
+    per-call overhead: a re-measure asks it for every stored point."""
+    top = max(values)
+    return top if all(v == v for v in values) else float("nan")
 
 
 @dataclass
@@ -60,7 +67,7 @@ class Measurement:
     @property
     def n_rays(self) -> int:
         """Rays used in the solution (excluded ones not counted)."""
-        return int((~self.excluded).sum())
+        return int(self.excluded.shape[0]) - int(np.count_nonzero(self.excluded))
 
     def record(self) -> JSONObject:
         """The point-schema row, keys in order; grid fields None without a grid."""
@@ -71,7 +78,7 @@ class Measurement:
                    sigma0=float(s.sigma0), n_rays=self.n_rays,
                    max_angle_deg=float(s.max_angle_deg), rms_m=float(s.rms_m),
                    max_residual_px=(None if s.residuals_px is None
-                                    else float(np.max(s.residuals_px))),
+                                    else largest(s.residuals_px.tolist())),
                    lon=self.lon, lat=self.lat, h_wgs84=self.h_wgs84,
                    measured_at=self.measured_at)
         if g is not None:

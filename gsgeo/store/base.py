@@ -9,6 +9,7 @@ running inside one may read, decide and write without races.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Iterable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from datetime import datetime
@@ -102,9 +103,10 @@ class Transaction(ABC):
     @abstractmethod
     def update_point(self, point: PointRecord, old_id: str | None = None) -> None:
         """Write ``point``; ``old_id`` is its previous id when it is being renamed."""
-    def update_results(self, points: list[PointRecord]) -> None:
+    def update_results(self, points: Iterable[PointRecord]) -> None:
         """Write the measured state (result, error, solved_rev, frame) of many points at once,
-        e.g. after a re-measure; their other fields are as stored. Backends may do it in bulk."""
+        e.g. after a re-measure; their other fields are as stored. Backends may do it in bulk;
+        ``points`` is consumed once, in order (a generator may make each result as it goes)."""
         for pt in points:
             self.update_point(pt)
 

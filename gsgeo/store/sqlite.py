@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -239,16 +239,26 @@ class SQLiteTransaction(Transaction):
                 raise ConflictError(f"point '{p.id}' already exists") from None
             raise
 
-    def update_results(self, points: list[PointRecord]) -> None:
+    def update_results(self, points: Iterable[PointRecord]) -> None:
         now = now_iso()
-        for p in points:
-            p.updated_at = now
+        frames: dict[int, tuple[JSON, str]] = {}  # id(frame) -> (frame, its text): most share one
+
+        def frame_text(frame: JSON) -> str:
+            got = frames.get(id(frame))
+            if got is None or got[0] is not frame:
+                got = frames[id(frame)] = (frame, _dumps(frame))
+            return got[1]
+
+        def rows() -> Iterator[tuple[object, ...]]:  # one at a time, as executemany asks
+            for p in points:
+                p.updated_at = now
+                yield (None if p.result is None else _dumps(p.result), p.error, p.solved_rev,
+                       None if p.frame is None else frame_text(p.frame), now, p.project_id,
+                       p.id)
+
         self.con.executemany(
             "UPDATE points SET result=?, error=?, solved_rev=?, frame=?, updated_at=?"
-            " WHERE project_id=? AND id=?",
-            [(None if p.result is None else _dumps(p.result), p.error, p.solved_rev,
-              None if p.frame is None else _dumps(p.frame), now, p.project_id, p.id)
-             for p in points])
+            " WHERE project_id=? AND id=?", rows())
 
     def delete_point(self, pid: str, point_id: str) -> bool:
         cur = self.con.execute("DELETE FROM points WHERE project_id = ? AND id = ?", (pid, point_id))
