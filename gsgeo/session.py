@@ -1,4 +1,5 @@
-"""The session JSON (README, "Session JSON"): rays of measured points, lines and polygons.
+"""The session JSON (README, "Session JSON"): rays of measured points, lines, polygons and
+LoD2 buildings (gsgeo.buildings.spec: roof faces as rings of point ids, a ground).
 
 `load_session` / `parse_session` validate the whole document and raise
 :class:`~gsgeo.errors.InputError` with the JSON path of the first problem
@@ -24,6 +25,7 @@ import numpy as np
 import orjson
 
 from gsgeo import limits
+from gsgeo.buildings.spec import BuildingSpec, parse_building
 from gsgeo.errors import InputError, join_field
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, MeasurementFailure, Rays, SolveSettings, measure_points
@@ -105,6 +107,7 @@ class Session:
     sigma_px: float = 1.0
     lines: list[Feature] = field(default_factory=list)
     polygons: list[Feature] = field(default_factory=list)
+    buildings: list[BuildingSpec] = field(default_factory=list)
 
 
 def load_session(path: str | Path) -> Session:
@@ -278,6 +281,23 @@ def _features(doc: JSON, key: str) -> list[Feature]:
     return out
 
 
+def _buildings(doc: JSONObject) -> list[BuildingSpec]:
+    """The session's buildings (gsgeo.buildings.spec.parse_building each), ids unique."""
+    items = doc.get("buildings")
+    if items is None:
+        return []
+    if not isinstance(items, list):
+        raise InputError(f"expected a list of buildings, got {_describe(items)}",
+                         field="buildings")
+    out = [parse_building(item, f"buildings[{i}]") for i, item in enumerate(items)]
+    seen: set[str] = set()
+    for i, b in enumerate(out):
+        if b.id in seen:
+            raise InputError(f"duplicate building id '{b.id}'", field=f"buildings[{i}].id")
+        seen.add(b.id)
+    return out
+
+
 def parse_session(doc: JSON) -> Session:
     """Validate a decoded session document."""
     if not isinstance(doc, dict):
@@ -303,6 +323,7 @@ def parse_session(doc: JSON) -> Session:
         sigma_px=sigma_px,
         lines=_features(doc, "lines"),
         polygons=_features(doc, "polygons"),
+        buildings=_buildings(doc),
     )
 
 

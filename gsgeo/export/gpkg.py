@@ -1,4 +1,5 @@
-"""GeoPackage writer (pyogrio): layers points, rays, lines, polygons, error_ellipses, check_points.
+"""GeoPackage writer (pyogrio): layers points, rays, lines, polygons, error_ellipses,
+check_points and buildings (one PolygonZ per surface of an LoD2 building).
 
 Layers with nothing to hold are not created. The CRS is registered by its EPSG code when it
 has one (a compound such as EPSG:27700+5701 is EPSG:7405); a compound without a code of its
@@ -115,6 +116,12 @@ def write_gpkg(path: Path, data: ExportData) -> None:
                        data.check_points, "Point Z" if z3 else "Point",
                        data.crs if z3 else data.horizontal_crs,
                        "check points (ground truth); d_* = measured - check"))
+    if data.buildings is not None:
+        layers.append(("buildings", lambda: _shapely_wkb(
+            [shapely.polygons(np.vstack([r, r[:1]])) for r in data.building_rings], 3),
+            data.buildings, "Polygon Z", data.crs, "gsgeo LoD2 buildings: one surface per row "
+            "(RoofSurface, WallSurface, GroundSurface), outward; the building's volume (m^3), "
+            "footprint area (m^2) and heights with 1 sigma"))
     try:
         with _no_sqlite_sync():
             for k, (name, geometry, table, gtype, crs, desc) in enumerate(layers):

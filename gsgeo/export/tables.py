@@ -1,4 +1,5 @@
-"""What an export holds, as column arrays: points, rays, lines, polygons, error ellipses, check points.
+"""What an export holds, as column arrays: points, rays, lines, polygons, error ellipses, check
+points and the surfaces of LoD2 buildings.
 
 `collect` turns measurements (gsgeo.measure.point.Measurement objects, or their ``to_dict()``
 JSON as the project store keeps it) plus lines and polygons given by point ids into an
@@ -53,6 +54,15 @@ POLYGON_TYPES: dict[str, str] = {"polygon_id": "str", "point_ids": "str", "n_poi
                                  "perimeter_2d": "float", "sigma_perimeter_2d": "float"}
 ELLIPSE_TYPES: dict[str, str] = {"point_id": "str", "ellipse_major_95": "float",
                                  "ellipse_minor_95": "float", "ellipse_bearing_deg": "float"}
+#: The buildings layer: one row per surface of a building's LoD2 solid (its semantic type and
+#: the building's measures: m^3, m^2, heights H in the CRS's vertical units, sigmas 1 sigma).
+BUILDING_MEASURES: tuple[str, ...] = (
+    "volume", "sigma_volume", "footprint_area", "sigma_footprint_area", "ground_height",
+    "sigma_ground_height", "eaves_height", "sigma_eaves_height", "ridge_height",
+    "sigma_ridge_height", "measured_height", "sigma_measured_height")
+BUILDING_TYPES: dict[str, str] = {"building_id": "str", "surface_index": "int",
+                                  "surface_type": "str", "roof_type": "str",
+                                  **dict.fromkeys(BUILDING_MEASURES, "float")}
 CHECK_POINT_TYPES: dict[str, str] = {"point_id": "str", "easting": "float", "northing": "float",
                                      "height": "float", "measured": "bool",
                                      "d_easting": "float", "d_northing": "float",
@@ -94,6 +104,8 @@ class ExportData:
     ellipse_xy: np.ndarray | None = None  # (M', V + 1, 2) closed rings
     check_points: Table | None = None
     check_xyz: np.ndarray | None = None  # (C, 3), NaN height where unknown
+    buildings: Table | None = None
+    building_rings: list[np.ndarray] = field(default_factory=list)  # (k, 3) open rings, E N H
 
 
 def _get(obj: Any, key: str, default: Any = None) -> Any:
@@ -300,10 +312,13 @@ def ellipse_rings(e: ArrayLike, n: ArrayLike, major: ArrayLike, minor: ArrayLike
 
 def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
             polygons: Iterable[Any] = (), check_points: Iterable[Any] = (),
-            map_layers: bool = True) -> ExportData:
+            buildings: Iterable[Any] = (), map_layers: bool = True) -> ExportData:
     """Validate and gather everything an export writes (see module docstring).
 
-    map_layers=False leaves out the rays and error ellipses (GeoPackage-only layers).
+    map_layers=False leaves out the rays, error ellipses and buildings (GeoPackage-only
+    layers). ``buildings``: built LoD2 models in the measurements' grid CRS, each with ``id``,
+    ``measures`` (a mapping) and ``surface_rings()`` ((kind, (k, 3) open ring) per surface),
+    as gsgeo.buildings.model.BuildingModel has them.
 
     Raises InputError (nothing measured, unknown or unsolved point ids, malformed input),
     GeometryError (a bad line or polygon, prefixed with its id) or CRSError (no grid CRS, or
@@ -385,7 +400,9 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
                                         np.nan_to_num(cols["ellipse_bearing_deg"][sel]),
                                         g.unit_factor)
     _collect_check_points(data, check_points, index, xyz, g)
-    for layer in ("points", "lines", "polygons", "check_points"):
+    if map_layers:
+        collect_buildings(data, buildings)
+    for layer in ("points", "lines", "polygons", "check_points", "buildings"):
         if getattr(data, layer) is not None:
             _check_text(layer, getattr(data, layer))
     return data
@@ -606,3 +623,40 @@ def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: 
         "measured": has,
         "d_easting": d[:, 0], "d_northing": d[:, 1], "d_height": d[:, 2],
     }, dict(CHECK_POINT_TYPES))
+
+
+def collect_buildings(data: ExportData, buildings: Iterable[Any]) -> None:
+    """The buildings layer of ``data``: one row per surface of each building (see collect)."""
+    got = building_table(buildings)
+    if got is not None:
+        data.buildings, data.building_rings = got
+
+
+def building_table(buildings: Iterable[Any]) -> tuple[Table, list[np.ndarray]] | None:
+    """One row per surface of each building (columns BUILDING_TYPES) and the surfaces' open
+    rings ((k, 3) E, N, H), or None without any; buildings as ``collect`` takes them."""
+    rows: list[tuple[str, int, str, Mapping[str, Any]]] = []
+    rings: list[np.ndarray] = []
+    for b in buildings:
+        bid = str(_get(b, "id"))
+        measures = _get(b, "measures") or {}
+        for k, (kind, ring) in enumerate(b.surface_rings()):
+            r = np.asarray(ring, dtype=np.float64).reshape(-1, 3)
+            if r.shape[0] < 3 or not np.all(np.isfinite(r)):
+                raise InputError(f"building '{bid}': surface {k} is not a ring of finite "
+                                 "E, N, H")
+            rows.append((bid, k, str(kind), measures))
+            rings.append(r)
+    if not rows:
+        return None
+    cols: dict[str, np.ndarray] = {
+        "building_id": np.array([r[0] for r in rows], dtype=object),
+        "surface_index": np.array([r[1] for r in rows], dtype=np.int32),
+        "surface_type": np.array([r[2] for r in rows], dtype=object),
+        "roof_type": np.array([None if r[3].get("roof_type") is None else str(r[3]["roof_type"])
+                               for r in rows], dtype=object),
+    }
+    for name in BUILDING_MEASURES:
+        vals = [r[3].get(name) for r in rows]
+        cols[name] = _column([math.nan if v is None else v for v in vals], "float", name)
+    return Table(cols, dict(BUILDING_TYPES)), rings

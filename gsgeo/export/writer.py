@@ -33,7 +33,8 @@ def format_for(path: str | os.PathLike, fmt: str | None = None) -> str:
 
 def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
                        lines: Iterable[Any] = (), polygons: Iterable[Any] = (),
-                       check_points: Iterable[Any] = (), fmt: str | None = None) -> Path:
+                       check_points: Iterable[Any] = (), buildings: Iterable[Any] = (),
+                       fmt: str | None = None) -> Path:
     """Export measured points, lines, polygons and check points to GeoPackage, GeoJSON or CSV.
 
     Parameters
@@ -49,6 +50,8 @@ def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
     check_points : ground truth in the same grid CRS, each with ``id`` (or ``point_id``) and
         ``easting``/``northing``/``height`` (or ``x``/``y``/``z``); written as a layer
         (GeoPackage) or null-geometry features (GeoJSON); not part of a CSV.
+    buildings : built LoD2 models (gsgeo.buildings.model.BuildingModel) in the same grid CRS;
+        a GeoPackage layer "buildings" (one row per surface), not part of GeoJSON or CSV.
     fmt : 'gpkg', 'geojson' (RFC 7946), 'geojson-grid' (legacy grid coordinates with a crs
         member, not RFC 7946) or 'csv'; None: from the suffix.
 
@@ -58,7 +61,7 @@ def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
     kind = format_for(path, fmt)
     target = check_target(path)
     data = collect(measurements, lines=lines, polygons=polygons, check_points=check_points,
-                   map_layers=kind == "gpkg")
+                   buildings=buildings, map_layers=kind == "gpkg")
     with atomic_path(target) as tmp:
         if kind == "gpkg":
             from gsgeo.export.gpkg import write_gpkg
@@ -76,7 +79,9 @@ def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
 
 
 def write_session_results(path: str | os.PathLike, results: Iterable[Any], session: Any, *,
-                          fmt: str | None = None) -> Path:
-    """`write_measurements` for `gsgeo solve -o`: measure_session results + the session's features."""
+                          fmt: str | None = None, buildings: Iterable[Any] = ()) -> Path:
+    """`write_measurements` for `gsgeo solve -o`: measure_session results + the session's
+    features (and its built buildings)."""
     return write_measurements(path, results, lines=getattr(session, "lines", ()) or (),
-                              polygons=getattr(session, "polygons", ()) or (), fmt=fmt)
+                              polygons=getattr(session, "polygons", ()) or (),
+                              buildings=buildings, fmt=fmt)

@@ -43,7 +43,8 @@ router = APIRouter(prefix="/api", responses={
     400: {"model": ErrorBody, "description": "Host header not served, or bad Content-Length"},
     401: {"model": ErrorBody, "description": "token missing or wrong (server bound off loopback)"},
     403: {"model": ErrorBody, "description": "cross-origin request"},
-    404: {"model": ErrorBody, "description": "no such project, point, line, polygon or check point"},
+    404: {"model": ErrorBody, "description": "no such project, point, line, polygon, building "
+                                             "or check point"},
     409: {"model": ErrorBody, "description": "id already taken, or the point is still in use"},
     413: {"model": ErrorBody, "description": "request body over the size limit"},
     422: {"model": ErrorBody, "description": "malformed request; message names the field"},
@@ -54,7 +55,8 @@ PID = Annotated[str, m.Field(description="project id", max_length=64)]
 ITEM = Annotated[str, m.Field(description="point, line, polygon or check point id",
                               max_length=100)]
 EXPORT_TYPES = {"gpkg": "application/geopackage+sqlite3", "geojson": "application/geo+json",
-                "geojson-grid": "application/json", "csv": "text/csv; charset=utf-8"}
+                "geojson-grid": "application/json", "csv": "text/csv; charset=utf-8",
+                "cityjson": "application/city+json"}
 
 
 #: The schema of the handlers that answer through ``fast_json`` (a Response the route passes on
@@ -205,7 +207,8 @@ def get_session(pid: PID, request: Request) -> dict[str, Any]:
                        for q in s.list_points(pid)],
             "lines": [{"id": f.id, "points": f.point_ids} for f, _ in s.list_features(pid, "line")],
             "polygons": [{"id": f.id, "points": f.point_ids}
-                         for f, _ in s.list_features(pid, "polygon")]}
+                         for f, _ in s.list_features(pid, "polygon")],
+            "buildings": [b["spec"] for b in s.list_buildings(pid)]}
 
 
 @router.post("/projects/{pid}/session", status_code=201,
@@ -299,6 +302,45 @@ _feature_routes("line", "lines")
 _feature_routes("polygon", "polygons")
 
 
+# buildings ---------------------------------------------------------------------------------
+@router.get("/projects/{pid}/buildings", response_model=JSON_OBJECT,
+            summary="List LoD2 buildings with their models (built from the points now)")
+def list_buildings(pid: PID, request: Request) -> dict[str, Any] | Response:
+    return fast_json({"buildings": svc(request).list_buildings(pid)})
+
+
+@router.post("/projects/{pid}/buildings", status_code=201, response_model=JSON_OBJECT,
+             summary="Create an LoD2 building from roof faces of measured points")
+def create_building(pid: PID, body: m.BuildingCreate,
+                    request: Request) -> dict[str, Any] | Response:
+    """The answer: the model (adjusted vertices in the grid, surfaces, adjustment, measures,
+    warnings) and ``vertices_ecef`` (ECEF metres, in the order of ``vertices``)."""
+    return fast_json(svc(request).add_building(pid, body.model_dump(exclude_unset=True)), 201)
+
+
+@router.get("/projects/{pid}/buildings/{bid}", response_model=JSON_OBJECT,
+            summary="One building with its model")
+def get_building(pid: PID, bid: ITEM, request: Request) -> dict[str, Any] | Response:
+    return fast_json(svc(request).get_building(pid, bid))
+
+
+@router.patch("/projects/{pid}/buildings/{bid}", response_model=JSON_OBJECT,
+              summary="Change a building (roofs, ground, attributes, id); rebuilds it")
+def patch_building(pid: PID, bid: ITEM, body: m.BuildingPatch,
+                   request: Request) -> dict[str, Any] | Response:
+    changes = body.model_dump(exclude_unset=True)
+    for key, value in changes.items():
+        if value is None:
+            raise InputError("must not be null", field=key)
+    return fast_json(svc(request).update_building(pid, bid, changes))
+
+
+@router.delete("/projects/{pid}/buildings/{bid}", status_code=204, summary="Delete a building")
+def delete_building(pid: PID, bid: ITEM, request: Request) -> Response:
+    svc(request).delete_building(pid, bid)
+    return Response(status_code=204)
+
+
 # check points ------------------------------------------------------------------------------
 def check_point_json(c: CheckPointRecord) -> dict[str, Any]:
     return {"id": c.id, "x": c.x, "y": c.y, "z": c.z, "crs": c.crs, "role": c.role,
@@ -384,15 +426,16 @@ def undo_georeference(pid: PID, request: Request) -> dict[str, Any]:
 
 
 # export ----------------------------------------------------------------------------------------
-@router.get("/projects/{pid}/export", summary="Download points, lines and polygons",
+@router.get("/projects/{pid}/export",
+            summary="Download points, lines, polygons and buildings (or buildings as CityJSON)",
             response_class=FileResponse,
             responses={200: {"content": {t: {} for t in EXPORT_TYPES.values()},
                              "description": "the file; header X-Gsgeo-Skipped lists features "
                                             "left out (failed points, invalid rings)"}})
 def export(pid: PID, request: Request,
-           format: Annotated[Literal["gpkg", "geojson", "geojson-grid", "csv"], Query(
+           format: Annotated[Literal["gpkg", "geojson", "geojson-grid", "csv", "cityjson"], Query(
                description="gpkg, geojson (RFC 7946), geojson-grid (legacy, grid "
-                           "coordinates) or csv")] = "gpkg",
+                           "coordinates), csv or cityjson (the buildings, CityJSON 2.0)")] = "gpkg",
            crs: Annotated[str | None, Query(max_length=20000, description=(
                "grid CRS; the project's when absent (another CRS re-measures from the rays)"))]
            = None,

@@ -9,7 +9,7 @@ names the field as well.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -207,3 +207,40 @@ class GeoreferenceRequest(BaseModel):
                                                      "the blunder test")
     scale_only: ScaleOnly | None = Field(None, description="fix only the scene's scale from "
                                                            "known distances")
+
+
+FaceIds = Annotated[list[ItemId], Field(max_length=1000)]
+Faces = Annotated[list[FaceIds], Field(max_length=1000)]
+Regularise = Annotated[list[Literal["horizontal_eaves", "rectangular"]], Field(max_length=2)]
+GROUND_HELP = ("the ground: a height in the project's height system (number), a measured point "
+               "id (text: its H), {\"height\": H, \"sigma\": m}, {\"point\": ID, \"sigma\": m} or "
+               "{\"dtm\": \"FILE.tif\"} (a GeoTIFF in DATA/dtm/, sampled under the footprint)")
+
+
+class BuildingCreate(BaseModel):
+    """An LoD2 building in the session-JSON form: roof faces as rings of measured point ids
+    (shared ids make shared edges), a ground, free attributes (copied to CityJSON)."""
+
+    model_config = ConfigDict(extra="forbid")
+    id: ItemId | None = Field(None, description="building id; next free 'B<n>' when absent")
+    roofs: Faces = Field(description="roof faces, each an ordered ring of point ids (not closed)")
+    walls: Faces = Field(default_factory=list, description=(
+        "vertical faces the roofs cannot express (a step between roof parts), rings of roof "
+        "point ids"))
+    ground: Any = Field(description=GROUND_HELP)
+    attributes: dict[str, Any] = Field(default_factory=dict,
+                                       description="free attributes, copied to CityJSON")
+    regularise: Regularise = Field(default_factory=list,
+                                   description="constraints of the adjustment")
+
+
+class BuildingPatch(BaseModel):
+    """Any subset of a building's fields; the rest stay as stored. It must still build."""
+
+    model_config = ConfigDict(extra="forbid")
+    id: ItemId | None = None
+    roofs: Faces | None = None
+    walls: Faces | None = None
+    ground: Any = Field(None, description=GROUND_HELP)
+    attributes: dict[str, Any] | None = None
+    regularise: Regularise | None = None

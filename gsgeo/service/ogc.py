@@ -1,8 +1,10 @@
 """A project's layers as OGC API – Features collections: metadata, pages of features, one feature.
 
 Collections are ``{pid}.points``, ``{pid}.lines``, ``{pid}.polygons``, ``{pid}.check_points``
-and ``{pid}.rays``. Their properties are the export's (gsgeo.export.tables: RECORD_KEYS /
-POINT_TYPES for points, the GeoPackage layers' column types for the others), and their values
+and ``{pid}.rays``, and ``{pid}.buildings`` (one feature per surface of an LoD2 building, id
+``{building}~{surface index}``) while the project has buildings. Their properties are the
+export's (gsgeo.export.tables: RECORD_KEYS / POINT_TYPES for points, the GeoPackage layers'
+column types for the others), and their values
 come from the same code the export uses (``collect``), so a feature says what the export says.
 
 Coordinates: CRS84 (longitude, latitude in degrees, WGS 84 ellipsoidal height in metres: a
@@ -29,17 +31,20 @@ from gsgeo.crs.resolve import grid_crs
 from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.export.gpkg import gpkg_crs
 from gsgeo.export.tables import (
+    BUILDING_TYPES,
     CHECK_POINT_TYPES,
     LINE_TYPES,
     POINT_TYPES,
     POLYGON_TYPES,
     RAY_TYPES,
     ExportData,
+    building_table,
     collect,
 )
 from gsgeo.georef.control import grid_to_ecef
 from gsgeo.jsontypes import JSONObject
 from gsgeo.measure.schema import RECORD_KEYS
+from gsgeo.service.buildings import spec_point_ids
 from gsgeo.service.measuring import solve_settings
 from gsgeo.service.projects import Projects, check_points_in_grid, feature_measures
 from gsgeo.store.base import PointFilter, Transaction
@@ -52,11 +57,15 @@ LAYERS: dict[str, dict[str, str]] = {
     "polygons": POLYGON_TYPES,
     "check_points": CHECK_POINT_TYPES,
     "rays": RAY_TYPES,
+    "buildings": BUILDING_TYPES,
 }
+#: Layers a project offers only while it holds something of them.
+OPTIONAL_LAYERS = ("buildings",)
 GEOMETRY = {"points": "PointZ", "lines": "LineStringZ", "polygons": "PolygonZ",
-            "check_points": "PointZ", "rays": "LineStringZ"}
+            "check_points": "PointZ", "rays": "LineStringZ", "buildings": "PolygonZ"}
 TITLES = {"points": "measured points", "lines": "lines", "polygons": "polygons",
-          "check_points": "check and control points", "rays": "rays (camera centre to point)"}
+          "check_points": "check and control points", "rays": "rays (camera centre to point)",
+          "buildings": "LoD2 buildings (one surface per feature)"}
 
 CRS84 = "http://www.opengis.net/def/crs/OGC/1.3/CRS84"
 CRS84H = "http://www.opengis.net/def/crs/OGC/0/CRS84h"
@@ -68,7 +77,8 @@ MAX_LIMIT = 10_000
 MAX_OFFSET = 2**53
 
 #: Properties a client may filter on (besides bbox and datetime), by layer.
-FILTERS = {"points": ("code",), "lines": (), "polygons": (), "check_points": (), "rays": ()}
+FILTERS = {"points": ("code",), "lines": (), "polygons": (), "check_points": (), "rays": (),
+           "buildings": ()}
 #: Layers whose features have a time (``measured_at``; a ray its point's).
 TEMPORAL = ("points", "rays")
 
@@ -233,8 +243,14 @@ class FeatureService:
         self.projects = projects
 
     def collections(self) -> list[Collection]:
-        """Every project's layers, projects in creation order."""
-        return [Collection(p, layer) for p in self.projects.list_projects() for layer in LAYERS]
+        """Every project's layers, projects in creation order (an optional layer only where
+        the project holds something of it)."""
+        out = []
+        with self.projects.store.transaction(write=False) as tx:
+            for p in tx.list_projects():
+                out += [Collection(p, layer) for layer in LAYERS
+                        if layer not in OPTIONAL_LAYERS or _holds(tx, p.id, layer)]
+        return out
 
     def collection(self, cid: str) -> Collection:
         """The collection ``{pid}.{layer}``; NotFoundError when there is none."""
@@ -244,8 +260,11 @@ class FeatureService:
                                 f"PROJECT.{'|'.join(LAYERS)}")
         with self.projects.store.transaction(write=False) as tx:
             p = tx.get_project(pid)
+            holds = layer not in OPTIONAL_LAYERS or p is None or _holds(tx, pid, layer)
         if p is None:
             raise NotFoundError(f"no collection '{cid}': project '{pid}' does not exist")
+        if not holds:
+            raise NotFoundError(f"no collection '{cid}': project '{pid}' has no {layer}")
         return Collection(p, layer)
 
     def items(self, cid: str, q: ItemQuery) -> ItemPage:
@@ -322,6 +341,8 @@ class FeatureService:
                 return self._rays(tx, p, crs, start, end)
             if c.layer == "check_points":
                 return self._check_points(tx, p, crs)
+            if c.layer == "buildings":
+                return self._buildings(tx, p, crs)
             return self._features(tx, p, crs, c.layer[:-1])
 
         feats, stamps = build(out)
@@ -366,6 +387,41 @@ class FeatureService:
                 ring = np.append(idx, idx[0])
                 geom = {"type": "Polygon", "coordinates": [xyz[ring].tolist()]}
             result.append({"type": "Feature", "id": f.id, "geometry": geom, "properties": prop})
+        return result, stamps
+
+    def _buildings(self, tx: Transaction, p: Project,
+                   out: OutputCRS) -> tuple[list[JSONObject], list[str]]:
+        """One feature per surface of each building that builds now (as the export: one that
+        cannot is left out); properties the GeoPackage buildings layer's."""
+        stored = tx.list_buildings(p.id)
+        stamps = [b.updated_at for b in stored]
+        for q in {q for b in stored for q in spec_point_ids(b.spec)}:
+            pt = tx.get_point(p.id, q)
+            if pt is not None:
+                stamps.append(pt.updated_at)
+        models = [r.model for r in (self.projects.built_in(tx, p, b) for b in stored)
+                  if r.model is not None]
+        got = building_table(models)
+        if got is None:
+            return [], stamps
+        table, rings = got
+        xyz = np.vstack(rings)
+        if not out.grid:
+            settings = solve_settings(p.settings(), self.projects.data_dir)
+            try:
+                lon, lat, h = ecef_to_geodetic_closed_form(grid_to_ecef(xyz, settings))
+            except GsgeoError:
+                return [], stamps
+            xyz = np.column_stack([lon, lat, h])
+        xyz = _axis_order(xyz, out)
+        ends = np.cumsum([len(r) for r in rings])
+        result = []
+        for prop, ring in zip(_rows(table.columns), np.split(xyz, ends[:-1]), strict=True):
+            closed = np.vstack([ring, ring[:1]])
+            result.append({"type": "Feature",
+                           "id": f"{prop['building_id']}~{prop['surface_index']}",
+                           "geometry": {"type": "Polygon", "coordinates": [closed.tolist()]},
+                           "properties": prop})
         return result, stamps
 
     def _check_points(self, tx: Transaction, p: Project,
@@ -440,6 +496,11 @@ class FeatureService:
                   "geometry": {"type": "LineString", "coordinates": s.tolist()},
                   "properties": prop} for prop, s in zip(props, seg, strict=True)]
         return feats, stamps
+
+
+def _holds(tx: Transaction, pid: str, layer: str) -> bool:
+    """Whether project ``pid`` holds something of the optional ``layer``."""
+    return layer == "buildings" and bool(tx.list_buildings(pid))
 
 
 # -- GeoJSON building ---------------------------------------------------------------------

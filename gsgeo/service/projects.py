@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 import secrets
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +25,12 @@ from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.georef.fit import georeference as fit_control
 from gsgeo.georef.scale import Distance, fit_scale, origin_of
 from gsgeo.jsontypes import JSON, JSONObject
-from gsgeo.measure import Measurement, MeasurementFailure, Rays
+from gsgeo.measure import Measurement, Rays
 from gsgeo.measure.accuracy import accuracy_report
-from gsgeo.measure.batch import measure_batch_json
+from gsgeo.measure.batch import measure_batch
 from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
 from gsgeo.measure.rays import SolveSettings
+from gsgeo.service.buildings import BuildingService, buildings_using, rename_point
 from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
 from gsgeo.service.georeferencing import (
     SceneFrame,
@@ -139,7 +140,7 @@ def intersect_point(point: PointInput, settings: JSONObject,
                    code=point.code, description=point.description)
 
 
-class Projects:
+class Projects(BuildingService):
     """The project service over a :class:`~gsgeo.store.base.Store`.
 
     ``data_dir`` is where geoid grids (DATA/geoids/) and scenes (DATA/scenes/) live.
@@ -174,6 +175,7 @@ class Projects:
                     "n_failed": sum(1 for q in pts if q.result is None),
                     "n_lines": len(tx.list_features(pid, "line")),
                     "n_polygons": len(tx.list_features(pid, "polygon")),
+                    "n_buildings": len(tx.list_buildings(pid)),
                     "n_check_points": len(tx.list_check_points(pid)),
                     "project": p}
 
@@ -271,23 +273,16 @@ class Projects:
                     pt.frame = None
                 elif pt.frame is None and pin is not None:
                     pt.frame = dict(pin)
-            tx.update_results(self._measure_many(pts, p, ctx))
-            n = len(pts)
-            # freed while the collector is still held: otherwise the objects the results are
-            # made of, still alive when it resumes, start a full collection
-            del pts
+            self._measure_many(pts, p, ctx)
+            tx.update_results(pts)
         p.scene_version = None if ctx is None else ctx.version
-        return n
+        return len(pts)
 
-    def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None
-                      ) -> Iterator[PointRecord]:
+    def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None) -> None:
         """Re-measure stored points with the settings of ``p`` in the scene frame ``ctx``, all
         at once (gsgeo.measure.batch: vectorised, point by point the result _measure_into
-        gives); a point that fails keeps the reason. Yields each point with its new result
-        for the store to write, then lets go of that result (its JSON is made and written
-        one point at a time, while it is still in the caches)."""
-        measured: list[JSONObject | str | None] = [None] * len(pts)
-        typed: list[tuple[int, Rays]] = []
+        gives); a point that fails keeps the reason."""
+        typed: list[tuple[PointRecord, Rays]] = []
         carries: dict[tuple[float, ...], FloatArray | None] = {}  # one per distinct frame
         point_carry: list[FloatArray | None] = []
         for pt in pts:
@@ -296,32 +291,35 @@ class Projects:
             if root not in carries:
                 carries[root] = carry(pt.frame, ctx)
             point_carry.append(carries[root])
-        for k, rays in enumerate(stored_rays_many([q.rays for q in pts], point_carry)):
+        for pt, rays in zip(pts, stored_rays_many([q.rays for q in pts], point_carry),
+                            strict=True):
             if isinstance(rays, Rays):
-                typed.append((k, rays))
+                typed.append((pt, rays))
             else:
-                measured[k] = str(rays)
-        if typed:
-            try:
-                settings = solve_settings(p.settings(), self.data_dir,
-                                          None if ctx is None else ctx.frame)
-                results = measure_batch_json([(pts[k].id, pts[k].code, pts[k].description,
-                                               rays, pts[k].excluded) for k, rays in typed],
-                                             settings)
-                for (k, _), res in zip(typed, results, strict=True):
-                    measured[k] = res.error if isinstance(res, MeasurementFailure) else res
-            except GsgeoError as exc:  # the settings fail every point alike (a missing grid)
-                for k, _ in typed:
-                    measured[k] = str(exc)
-        for pt, done in zip(pts, measured, strict=True):
-            pt.record = None  # the point-schema record is derived when the point is read again
-            if isinstance(done, dict):
-                # Measurement.to_dict(), stored as is: the store writes non-finite numbers as null
-                pt.result, pt.error = done, None
+                pt.result = pt.record = None
+                pt.error = str(rays)
+        if not typed:
+            return
+        try:
+            settings = solve_settings(p.settings(), self.data_dir,
+                                      None if ctx is None else ctx.frame)
+            results = measure_batch([(pt.id, pt.code, pt.description, rays, pt.excluded)
+                                     for pt, rays in typed], settings)
+        except GsgeoError as exc:  # the settings fail every point alike (e.g. a missing grid)
+            for pt, _ in typed:
+                pt.result = pt.record = None
+                pt.error = str(exc)
+            return
+        for (pt, _), res in zip(typed, results, strict=True):
+            if isinstance(res, Measurement):
+                # stored as is: the store writes non-finite numbers as null; the point-schema
+                # record is derived when the point is read again
+                pt.result = res.to_dict()
+                pt.record = None
+                pt.error = None
             else:
-                pt.result, pt.error = None, done
-            yield pt
-            pt.result = None  # written
+                pt.result = pt.record = None
+                pt.error = res.error
 
     def delete_project(self, pid: str) -> None:
         with self.store.transaction() as tx:
@@ -473,31 +471,36 @@ class Projects:
                         if old_id in f.point_ids:
                             f.point_ids = [pt.id if q == old_id else q for q in f.point_ids]
                             tx.update_feature(f)
+                rename_point(tx, pid, old_id, pt.id)
             return pt
 
     def delete_point(self, pid: str, point_id: str) -> None:
-        """Delete a point; refused while a line or polygon uses it."""
+        """Delete a point; refused while a line, polygon or building uses it."""
         with self.store.transaction() as tx:
             self._point(tx, pid, point_id)
             users = [f"{f.kind} '{f.id}'" for kind in KINDS for f in tx.list_features(pid, kind)
                      if point_id in f.point_ids]
+            users += [f"building '{b}'" for b in buildings_using(tx, pid, point_id)]
             if users:
                 raise ConflictError(f"point '{point_id}' is used by {', '.join(users)}; "
                                     "delete or change those first")
             tx.delete_point(pid, point_id)
 
     def import_session(self, pid: str, doc: JSON) -> dict[str, int]:
-        """Add the points, lines and polygons of a session JSON document, all or nothing.
+        """Add the points, lines, polygons and buildings of a session JSON document, all or
+        nothing.
 
         Points are solved with the project's settings (the session's own crs/sigma_px are
         ignored); an id that exists already, or a point that cannot be solved, refuses the
         whole import with a message naming it.
         """
+        from gsgeo.buildings.spec import building_to_json
         from gsgeo.session import parse_session
 
         session = parse_session(doc)
-        if not session.points and not session.lines and not session.polygons:
-            raise InputError("the session has no points, lines or polygons", field="points")
+        if not (session.points or session.lines or session.polygons or session.buildings):
+            raise InputError("the session has no points, lines, polygons or buildings",
+                             field="points")
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
             for i, sp in enumerate(session.points):
@@ -529,8 +532,14 @@ class Projects:
                         raise ConflictError(f"{kind} '{fid}' already exists", field=f"{at}.id")
                     tx.insert_feature(FeatureRecord(project_id=pid, kind=kind, id=fid,
                                                     point_ids=ids))
-        return {"points": len(session.points), "lines": len(session.lines),
-                "polygons": len(session.polygons)}
+            for i, spec in enumerate(session.buildings):
+                try:
+                    self._store_building(tx, p, building_to_json(spec))
+                except GsgeoError as exc:
+                    raise exc.within(f"buildings[{i}]") from None
+        counts = {"points": len(session.points), "lines": len(session.lines),
+                  "polygons": len(session.polygons)}
+        return counts | ({"buildings": len(session.buildings)} if session.buildings else {})
 
     # lines and polygons ---------------------------------------------------------------
     def _feature_points(self, tx: Transaction, pid: str, kind: str, ids: JSON) -> list[str]:
