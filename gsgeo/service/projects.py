@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 import secrets
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,9 +25,9 @@ from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.georef.fit import georeference as fit_control
 from gsgeo.georef.scale import Distance, fit_scale, origin_of
 from gsgeo.jsontypes import JSON, JSONObject
-from gsgeo.measure import Measurement, Rays
+from gsgeo.measure import Measurement, MeasurementFailure, Rays
 from gsgeo.measure.accuracy import accuracy_report
-from gsgeo.measure.batch import measure_batch
+from gsgeo.measure.batch import measure_batch_json
 from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
 from gsgeo.measure.rays import SolveSettings
 from gsgeo.service.buildings import BuildingService, buildings_using, rename_point
@@ -273,16 +273,23 @@ class Projects(BuildingService):
                     pt.frame = None
                 elif pt.frame is None and pin is not None:
                     pt.frame = dict(pin)
-            self._measure_many(pts, p, ctx)
-            tx.update_results(pts)
+            tx.update_results(self._measure_many(pts, p, ctx))
+            n = len(pts)
+            # freed while the collector is still held: otherwise the objects the results are
+            # made of, still alive when it resumes, start a full collection
+            del pts
         p.scene_version = None if ctx is None else ctx.version
-        return len(pts)
+        return n
 
-    def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None) -> None:
+    def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None
+                      ) -> Iterator[PointRecord]:
         """Re-measure stored points with the settings of ``p`` in the scene frame ``ctx``, all
         at once (gsgeo.measure.batch: vectorised, point by point the result _measure_into
-        gives); a point that fails keeps the reason."""
-        typed: list[tuple[PointRecord, Rays]] = []
+        gives); a point that fails keeps the reason. Yields each point with its new result
+        for the store to write, then lets go of that result (its JSON is made and written
+        one point at a time, while it is still in the caches)."""
+        measured: list[JSONObject | str | None] = [None] * len(pts)
+        typed: list[tuple[int, Rays]] = []
         carries: dict[tuple[float, ...], FloatArray | None] = {}  # one per distinct frame
         point_carry: list[FloatArray | None] = []
         for pt in pts:
@@ -291,35 +298,32 @@ class Projects(BuildingService):
             if root not in carries:
                 carries[root] = carry(pt.frame, ctx)
             point_carry.append(carries[root])
-        for pt, rays in zip(pts, stored_rays_many([q.rays for q in pts], point_carry),
-                            strict=True):
+        for k, rays in enumerate(stored_rays_many([q.rays for q in pts], point_carry)):
             if isinstance(rays, Rays):
-                typed.append((pt, rays))
+                typed.append((k, rays))
             else:
-                pt.result = pt.record = None
-                pt.error = str(rays)
-        if not typed:
-            return
-        try:
-            settings = solve_settings(p.settings(), self.data_dir,
-                                      None if ctx is None else ctx.frame)
-            results = measure_batch([(pt.id, pt.code, pt.description, rays, pt.excluded)
-                                     for pt, rays in typed], settings)
-        except GsgeoError as exc:  # the settings fail every point alike (e.g. a missing grid)
-            for pt, _ in typed:
-                pt.result = pt.record = None
-                pt.error = str(exc)
-            return
-        for (pt, _), res in zip(typed, results, strict=True):
-            if isinstance(res, Measurement):
-                # stored as is: the store writes non-finite numbers as null; the point-schema
-                # record is derived when the point is read again
-                pt.result = res.to_dict()
-                pt.record = None
-                pt.error = None
+                measured[k] = str(rays)
+        if typed:
+            try:
+                settings = solve_settings(p.settings(), self.data_dir,
+                                          None if ctx is None else ctx.frame)
+                results = measure_batch_json([(pts[k].id, pts[k].code, pts[k].description,
+                                               rays, pts[k].excluded) for k, rays in typed],
+                                             settings)
+                for (k, _), res in zip(typed, results, strict=True):
+                    measured[k] = res.error if isinstance(res, MeasurementFailure) else res
+            except GsgeoError as exc:  # the settings fail every point alike (a missing grid)
+                for k, _ in typed:
+                    measured[k] = str(exc)
+        for pt, done in zip(pts, measured, strict=True):
+            pt.record = None  # the point-schema record is derived when the point is read again
+            if isinstance(done, dict):
+                # Measurement.to_dict(), stored as is: the store writes non-finite numbers as null
+                pt.result, pt.error = done, None
             else:
-                pt.result = pt.record = None
-                pt.error = res.error
+                pt.result, pt.error = None, done
+            yield pt
+            pt.result = None  # written
 
     def delete_project(self, pid: str) -> None:
         with self.store.transaction() as tx:
