@@ -351,3 +351,88 @@ console.log(JSON.stringify(data.cases.map((c) => S.raysInCurrentFrame(c.pt, c.mm
         assert np.allclose(r["direction"], q / np.linalg.norm(q))
         assert r["model_matrix"] == col(mm_now) and r["ifov"] == 1e-3 and r["pixel"] == [1, 2]
     assert same == stored and unsolved == stored
+
+
+def test_building_capture_state_machine():
+    """web/js/tools/building.js (B): picked corners go into the face being clicked (a repeated
+    or unsolved point is refused by name), Enter closes a face of 3 or more corners (fewer: a
+    message, nothing changes), a click on the face's first corner closes it too, Backspace
+    removes the last corner and on an empty face reopens the previous one; Enter on an empty
+    face without a ground is refused, with one POSTs {id, roofs, ground} (the next free id
+    B<n>, the ground a height or a point id) and returns to the default tool; Esc cancels."""
+    got = run_tools_js("""
+const solved = new Set(["E1", "E2", "E3", "E4", "R1", "R2"]);
+ctx.pointById = (id) => (solved.has(id) ? { id, result: { point_ecef: [1, 2, 3] } }
+  : (id === "U" ? { id, result: null } : null));
+ctx.modelMatrix = () => [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1];
+const stored = [];
+ctx.buildingStored = (b) => stored.push(b.id);
+ctx.fail = (e) => messages.push(`fail: ${e.message}`);
+const sent = [];
+globalThis.fetch = async (url, init) => {
+  sent.push({ url, method: init.method, body: JSON.parse(init.body) });
+  const made = { id: "B2", measures: { roof_type: "gable", volume: 437.5 } };
+  return { ok: true, status: 201, json: async () => made };
+};
+state.project = { id: "p" };
+state.buildings = [{ id: "B1" }, { id: "X" }];
+const B = () => JSON.parse(JSON.stringify(state.building));
+const r = {};
+r.start = [T.activate(ctx, "building"), state.mode, B(), document.getElementById("bld-id").value];
+const tool = T.activeTool(state);
+for (const id of ["E1", "E2", "R2", "R1", "E2", "U"]) tool.pick(ctx, id);
+r.picked = [B(), messages.splice(0)];
+await tool.finish(ctx);
+r.closed = B();
+tool.pick(ctx, "E3"); tool.pick(ctx, "E4");
+await tool.finish(ctx);
+r.short = [B(), messages.splice(0)];
+tool.undo(ctx); tool.undo(ctx);
+r.undone = B();
+tool.undo(ctx);
+r.reopened = B();
+tool.pick(ctx, "E1");
+r.closedByFirst = B();
+for (const id of ["E3", "E4", "R1", "R2"]) tool.pick(ctx, id);
+await tool.finish(ctx);
+r.twoFaces = B();
+await tool.finish(ctx);
+r.noGround = [sent.length, state.mode, messages.splice(0)];
+document.querySelector("#bld-ground").value = " 10,25 ";
+await tool.finish(ctx);
+r.stored = [sent, state.mode, state.building, stored, messages.splice(0)];
+T.activate(ctx, "building");
+T.activeTool(state).pick(ctx, "E1");
+T.activeTool(state).cancel(ctx, { key: "Escape" });
+r.cancelled = [state.mode, state.building, messages.splice(0)];
+console.log(JSON.stringify(r));""")
+    assert got["start"] == [True, "building", {"faces": [], "current": []}, "B2"]
+    face1 = ["E1", "E2", "R2", "R1"]
+    assert got["picked"] == [{"faces": [], "current": face1},
+                             ["E2 is already a corner of this face.", "U has no solved position."]]
+    assert got["closed"] == {"faces": [face1], "current": []}
+    assert got["short"] == [{"faces": [face1], "current": ["E3", "E4"]},
+                            ["A roof face needs at least 3 corners (2 so far)."]]
+    assert got["undone"] == {"faces": [face1], "current": []}
+    assert got["reopened"] == {"faces": [], "current": face1}
+    assert got["closedByFirst"] == {"faces": [face1], "current": []}
+    face2 = ["E3", "E4", "R1", "R2"]
+    assert got["twoFaces"] == {"faces": [face1, face2], "current": []}
+    assert got["noGround"][:2] == [0, "building"]
+    assert "Give the ground" in got["noGround"][2][0]
+    sent, mode, building, stored, msgs = got["stored"]
+    assert sent == [{"url": "/api/projects/p/buildings", "method": "POST",
+                     "body": {"id": "B2", "roofs": [face1, face2], "ground": 10.25}}]
+    assert (mode, building, stored) == ("idle", None, ["B2"])
+    assert msgs == ["Stored building B2 (gable roof), volume 437.5 m³."]
+    assert got["cancelled"] == ["idle", None, ["Building cancelled."]]
+
+
+def test_building_ground_field():
+    """The ground field: a number (comma or point as the decimal sign) is a height, other text
+    the id of a measured ground point, an empty field nothing."""
+    texts = ["12.5", " -3 ", "12,5", "1e2", "G7", "12a", "", "   ", ".5"]
+    got = run_tools_js(f"""
+const S = await import('{(WEB_JS / "tools" / "building.js").as_uri()}');
+console.log(JSON.stringify({json.dumps(texts)}.map((t) => S.parseGround(t))));""")
+    assert got == [12.5, -3, 12.5, 100, "G7", "12a", None, None, 0.5]

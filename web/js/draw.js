@@ -16,6 +16,10 @@ export const COLORS = {
   line: Cesium.Color.fromCssColorString("#3fb950"),
   polygon: Cesium.Color.fromCssColorString("#d2a8ff"),
   draft: Cesium.Color.fromCssColorString("#ffffff"),
+  // building surfaces by kind (CityJSON semantic surface types), drawn translucent
+  RoofSurface: Cesium.Color.fromCssColorString("#ff3d2e"),
+  WallSurface: Cesium.Color.fromCssColorString("#ffd24a"),
+  GroundSurface: Cesium.Color.fromCssColorString("#8a939b"),
 };
 
 /** The 3-D confidence scale of a drawn ellipsoid: 95 % (sqrt of chi-square(3) 0.95) or 1 sigma. */
@@ -115,6 +119,14 @@ export class Drawer {
       this.overlay.add(group, ring, { color: css, width: 1.5, closed: true });
     }
     return radii;
+  }
+
+  /** A planar face through rendered positions (a ring, not closed), filled with `color` at
+   *  `alpha` and outlined by `edge` (drawn on the overlay, farther faces first). */
+  face(group, positions, color, alpha, edge, width = 1.5) {
+    if (positions.length < 3) return;
+    this.overlay.add(group, positions, { fill: color.withAlpha(alpha).toCssColorString(),
+      color: edge.toCssColorString(), width, closed: true });
   }
 
   /** A polyline through rendered positions (drawn on the overlay); closed when `closed`. */

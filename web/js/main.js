@@ -9,6 +9,7 @@ import { upsert, usesAny, without } from "./merge.js";
 import { $, fixed, mm, h, measuresText } from "./format.js";
 import { TOOLS, activeTool, activate, handlerOf, release, toolByShortcut } from "./tools/index.js";
 import { georefPanel } from "./georef.js";
+import { buildingsPanel } from "./buildings.js";
 import { georefVersion, moveCamera } from "./similarity.js";
 
 const Cesium = window.Cesium;
@@ -30,6 +31,8 @@ const state = {
   mode: "idle", // the active tool's id (tools/index.js): idle | measure | line | polygon
   measure: null, // the measure tool's point: {rays, excluded:Set, editing, pointId, solution, error, seq}
   feature: null, // the line or polygon tool's draft: {kind, points: []}
+  building: null, // the building tool's capture: {faces: [[point ids]], current: [point ids]}
+  buildings: [], // the project's LoD2 buildings (buildings.js)
   conf: "95",
 };
 
@@ -215,6 +218,7 @@ async function openProject(pid) {
     state.project = null;
     state.points = []; state.lines = []; state.polygons = [];
     renderAll();
+    await buildings.load();
     georef.refresh();
     return;
   }
@@ -242,6 +246,7 @@ async function refreshProjectData() {
   state.polygons = polys.polygons;
   state.checkPoints = cps.check_points.length;
   renderAll();
+  await buildings.load();
   await refreshAccuracy();
   georef.refresh();
 }
@@ -262,6 +267,7 @@ async function pointStored(pt, oldId = pt.id) {
   if (lines) state.lines = lines.lines;
   if (polys) state.polygons = polys.polygons;
   renderAll();
+  if (buildings.uses(ids)) await buildings.load();
   await refreshAccuracy();
   georef.refresh();
 }
@@ -415,11 +421,13 @@ function confScale() { return state.conf === "95" ? SCALE_95_3D : 1; }
 const ctx = {
   state, viewer, draw, message, fail, modelMatrix, solveSettings, confScale,
   pointById, nearestPoint, selectPoint, updateStatus, pointStored, featureStored,
+  buildingStored: (b) => buildings.stored(b),
   georefVersion: currentGeorefVersion,
   done: () => release(ctx),
 };
 
 const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged });
+const buildings = buildingsPanel({ state, draw, modelMatrix, message, fail });
 
 // ---------------------------------------------------------------------------------------
 // points
@@ -693,6 +701,7 @@ function renderAll() {
 function redrawAll() {
   drawSelected();
   drawFeatures();
+  buildings.redraw();
   const tool = activeTool(state);
   if (tool.redraw) tool.redraw(ctx);
 }

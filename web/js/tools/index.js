@@ -2,6 +2,7 @@
 // active tool, whose id is state.mode; a new tool is one module and one line in TOOLS.
 // The interface is described in docs/architecture.md ("Web client").
 
+import building from "./building.js";
 import idle from "./idle.js";
 import line from "./line.js";
 import measure from "./measure.js";
@@ -13,6 +14,7 @@ export const TOOLS = [
   measure,
   line,
   polygon,
+  building,
 ];
 
 export const DEFAULT_TOOL = TOOLS[0];
