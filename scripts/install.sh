@@ -47,6 +47,9 @@ PIP=(.venv/bin/python -m pip install --quiet --disable-pip-version-check)
 
 if [ "$test_deps" = 1 ]; then
     "${PIP[@]}" -e '.[test]'
+    # The official CityJSON 2.0 schema the tests validate against (tests/cityjson_helpers.py),
+    # read out of the official validator's wheel on PyPI by scripts/cityjson_schema.py.
+    .venv/bin/python scripts/cityjson_schema.py .venv/share/cityjson-schemas/2.0
     missing=()
     command -v chromium >/dev/null 2>&1 || missing+=(chromium)
     # egm96_15.gtx, the one geoid Debian ships, for the vertical-datum tests.

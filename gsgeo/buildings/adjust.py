@@ -99,10 +99,12 @@ def _check_covariances(cov: FloatArray) -> FloatArray:
                             "covariance with positive variances") from None
 
 
-def adjust(l: FloatArray, cov: FloatArray, constraints: Constraints) -> Adjusted:
+def adjust(l: FloatArray, cov: FloatArray, constraints: Constraints, *,
+           covariance: bool = True) -> Adjusted:
     """Adjust the observed vertices ``l`` (n, 3; metres, local frame) with covariances ``cov``
     (n, 3, 3; m²) so that every constraint holds exactly; see the module docstring.
 
+    ``covariance=False`` skips the adjusted vertices' covariance (``cov`` is then empty).
     Raises GeometryError when the constraints cannot all be met (a plane through too few or
     collinear points, constraints that contradict each other).
     """
@@ -131,44 +133,46 @@ def adjust(l: FloatArray, cov: FloatArray, constraints: Constraints) -> Adjusted
     if has_h:
         x[eaves, 2] = h
 
-    rows = [np.asarray(p.vertices, dtype=np.int64) for p in planes]
+    # The Jacobian's pattern is fixed; its rows: plane-vertex conditions, unit normals,
+    # vertical normals, eave heights, right angles.
+    pv_plane = np.concatenate([np.full(len(p.vertices), j, dtype=np.int64)
+                               for j, p in enumerate(planes)])
+    pv_vertex = np.concatenate([np.asarray(p.vertices, dtype=np.int64) for p in planes])
+    n_pv = pv_plane.size
+    rows_pv = np.arange(n_pv)[:, None]
+    xcols = 3 * pv_vertex[:, None] + np.arange(3)
+    pcols = col_p + 4 * pv_plane[:, None] + np.arange(3)
+    rows_n = n_pv + np.arange(npl)
+    ncols = col_p + 4 * np.arange(npl)[:, None] + np.arange(3)
+    vertical = np.array([j for j, p in enumerate(planes) if p.vertical], dtype=np.int64)
+    rows_v = n_pv + npl + np.arange(n_vert)
+    rows_e = n_pv + npl + n_vert + np.arange(eaves.size)
+    rows_r = n_pv + npl + n_vert + eaves.size
+    a = np.zeros((m, nunk))
+    c = np.zeros(m)
+    a[np.arange(n_pv), col_p + 4 * pv_plane + 3] = -1.0
+    a[rows_v, col_p + 4 * vertical + 2] = 1.0
+    a[rows_e, 3 * eaves + 2] = 1.0
+    if has_h:
+        a[rows_e, col_h] = -1.0
     kkt = np.zeros((nunk + m, nunk + m))
     kkt[:nx, :nx] = w_full
     iterations = 0
     for _ in range(MAX_ITERATIONS):
         iterations += 1
-        a = np.zeros((m, nunk))
-        c = np.zeros(m)
-        r = 0
-        for j, idx in enumerate(rows):
-            k = idx.size
-            u, d = par[j, :3], par[j, 3]
-            rr = np.arange(r, r + k)
-            for ax in range(3):
-                a[rr, 3 * idx + ax] = u[ax]
-            a[rr, col_p + 4 * j:col_p + 4 * j + 3] = x[idx]
-            a[rr, col_p + 4 * j + 3] = -1.0
-            c[rr] = x[idx] @ u - d
-            r += k
-        for j in range(npl):
-            u = par[j, :3]
-            a[r, col_p + 4 * j:col_p + 4 * j + 3] = u
-            c[r] = 0.5 * (u @ u - 1.0)
-            r += 1
-            if planes[j].vertical:
-                a[r, col_p + 4 * j + 2] = 1.0
-                c[r] = u[2]
-                r += 1
-        for i in eaves:
-            a[r, 3 * i + 2] = 1.0
-            a[r, col_h] = -1.0
-            c[r] = x[i, 2] - h
-            r += 1
-        for pa, pb in constraints.right_angles:
-            a[r, col_p + 4 * pa:col_p + 4 * pa + 3] = par[pb, :3]
-            a[r, col_p + 4 * pb:col_p + 4 * pb + 3] = par[pa, :3]
-            c[r] = par[pa, :3] @ par[pb, :3]
-            r += 1
+        u = par[pv_plane, :3]
+        xv = x[pv_vertex]
+        a[rows_pv, xcols] = u
+        a[rows_pv, pcols] = xv
+        c[:n_pv] = np.einsum("ij,ij->i", xv, u) - par[pv_plane, 3]
+        a[rows_n[:, None], ncols] = par[:, :3]
+        c[rows_n] = 0.5 * (np.einsum("ij,ij->i", par[:, :3], par[:, :3]) - 1.0)
+        c[rows_v] = par[vertical, 2]
+        c[rows_e] = x[eaves, 2] - h
+        for k, (pa, pb) in enumerate(constraints.right_angles):
+            a[rows_r + k, col_p + 4 * pa:col_p + 4 * pa + 3] = par[pb, :3]
+            a[rows_r + k, col_p + 4 * pb:col_p + 4 * pb + 3] = par[pa, :3]
+            c[rows_r + k] = par[pa, :3] @ par[pb, :3]
         kkt[:nunk, nunk:] = a.T
         kkt[nunk:, :nunk] = a
         rhs = np.zeros(nunk + m)
@@ -194,10 +198,12 @@ def adjust(l: FloatArray, cov: FloatArray, constraints: Constraints) -> Adjusted
     if not np.all(np.isfinite(x)):
         raise GeometryError("the planarity adjustment diverged")
 
-    unit = np.zeros((nunk + m, nx))
-    unit[:nx, :nx] = np.eye(nx)
-    cov_x = np.linalg.solve(kkt, unit)[:nx]
-    cov_x = 0.5 * (cov_x + cov_x.T)
+    cov_x = np.zeros((0, 0))
+    if covariance:
+        unit = np.zeros((nunk + m, nx))
+        unit[:nx, :nx] = np.eye(nx)
+        cov_x = np.linalg.solve(kkt, unit)[:nx]
+        cov_x = 0.5 * (cov_x + cov_x.T)
     v = (x - l)
     omega = float(np.einsum("ni,nij,nj->", v, weights, v))
     p_value = float(chi2_sf(omega, dof)) if dof > 0 else 1.0
@@ -228,7 +234,8 @@ class PlaneTest:
 def plane_test(l: FloatArray, cov: FloatArray, vertical: bool = False) -> PlaneTest:
     """Fit one plane to the points ``l`` (k, 3; metres) weighted by ``cov`` (k, 3, 3; m²)."""
     k = l.shape[0]
-    res = adjust(l, cov, Constraints(planes=(PlaneSet(tuple(range(k)), vertical),)))
+    res = adjust(l, cov, Constraints(planes=(PlaneSet(tuple(range(k)), vertical),)),
+                 covariance=False)
     u, d = res.planes[0, :3], res.planes[0, 3]
     w = l @ u - d
     var = np.einsum("i,nij,j->n", u, cov, u)

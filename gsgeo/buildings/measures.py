@@ -106,11 +106,13 @@ def ridge_vertices(roof_xyz: FloatArray) -> list[int]:
     return [int(i) for i in np.flatnonzero(roof_xyz[:, 2] >= top - RIDGE_TOLERANCE_M)]
 
 
-def _slope_aspect(x: FloatArray) -> tuple[float, float]:
-    nrm = newell_normal(x)
-    slope = math.degrees(math.atan2(math.hypot(nrm[0], nrm[1]), nrm[2]))
-    aspect = math.degrees(math.atan2(nrm[0], nrm[1])) % 360.0
-    return slope, aspect
+def _slopes(x: FloatArray) -> FloatArray:
+    """Slope (degrees) of each ring in ``x`` (B, k, 3), from its Newell normal."""
+    y = np.roll(x, -1, axis=1)
+    nx = np.sum((x[..., 1] - y[..., 1]) * (x[..., 2] + y[..., 2]), axis=-1)
+    ny = np.sum((x[..., 2] - y[..., 2]) * (x[..., 0] + y[..., 0]), axis=-1)
+    nz = np.sum((x[..., 0] - y[..., 0]) * (x[..., 1] + y[..., 1]), axis=-1)
+    return np.degrees(np.arctan2(np.hypot(nx, ny), nz))
 
 
 def roof_slopes(shell: Shell, roofs: Sequence[tuple[int, ...]]) -> list[dict[str, float | int]]:
@@ -119,16 +121,16 @@ def roof_slopes(shell: Shell, roofs: Sequence[tuple[int, ...]]) -> list[dict[str
     step = 1e-6
     for i, ring in enumerate(roofs):
         idx = list(ring)
-        x = shell.vertices[idx].copy()
-        slope, aspect = _slope_aspect(x)
+        x = shell.vertices[idx]
+        nrm = newell_normal(x)
+        slope = math.degrees(math.atan2(math.hypot(nrm[0], nrm[1]), nrm[2]))
+        aspect = math.degrees(math.atan2(nrm[0], nrm[1])) % 360.0
+        k = len(idx)
+        # central differences, every coordinate of the face at once: (2, 3k, k, 3) copies
+        bump = np.eye(3 * k).reshape(3 * k, k, 3) * step
+        both = _slopes(np.concatenate([x + bump, x - bump]))
         grad = np.zeros_like(shell.vertices)
-        for k, v in enumerate(idx):
-            for ax in range(3):
-                xp = x.copy()
-                xm = x.copy()
-                xp[k, ax] += step
-                xm[k, ax] -= step
-                grad[v, ax] = (_slope_aspect(xp)[0] - _slope_aspect(xm)[0]) / (2 * step)
+        grad[idx] = ((both[:3 * k] - both[3 * k:]) / (2 * step)).reshape(k, 3)
         out.append({"face": i, "slope_deg": slope,
                     "sigma_slope_deg": math.sqrt(max(shell.variance(grad), 0.0)),
                     "aspect_deg": aspect})

@@ -129,6 +129,36 @@ def _point(points: Points, pid: str, fld: str, warn_missing: list[str]
     return xyz, cov
 
 
+def _measured(spec: BuildingSpec, points: Points
+              ) -> tuple[list[str], FloatArray, FloatArray, list[str]]:
+    """The roof ids, their coordinates (n, 3) and covariances (n, 3, 3), and the ids that had
+    no covariance; InputError naming every unknown id."""
+    ids = _roof_ids(spec)
+    unknown = [p for p in ids if p not in points]
+    if unknown:
+        what = "an unknown point" if len(unknown) == 1 else "unknown points"
+        raise InputError(f"the roof names {what} " + ", ".join(repr(p) for p in unknown),
+                         field="roofs")
+    no_cov: list[str] = []
+    pts = [_point(points, p, "roofs", no_cov) for p in ids]
+    return ids, np.array([p[0] for p in pts]), np.array([p[1] for p in pts]), no_cov
+
+
+def footprint_en(spec: BuildingSpec, points: Points, *, unit_m: float = 1.0,
+                 vertical_unit_m: float = 1.0) -> FloatArray:
+    """The building's outline in plan (k, 2; grid E, N, CRS units) from the measured points,
+    counter-clockwise: what gsgeo.buildings.ground.dtm_ground samples. Raises the errors of
+    build_building about unknown ids and broken topology."""
+    ids, xyz, cov, _ = _measured(spec, points)
+    scale = np.array([unit_m, unit_m, vertical_unit_m])
+    origin = xyz.mean(axis=0)
+    index = {p: k for k, p in enumerate(ids)}
+    topo = build_topology([tuple(index[p] for p in r) for r in spec.roofs],
+                          [tuple(index[p] for p in w) for w in spec.walls],
+                          (xyz - origin) * scale, cov, ids)
+    return np.asarray(xyz[topo.outline, :2], dtype=np.float64)
+
+
 def _resolve_ground(spec: BuildingSpec, points: Points, ground_height: float | None,
                     ground_sigma: float, warn: list[str]) -> tuple[float, float]:
     """The ground height (CRS units) and its 1-sigma (m)."""
@@ -229,15 +259,7 @@ def build_building(spec: BuildingSpec, points: Points, ground_height: float | No
     non-planar face and its worst point, or what breaks the solid's topology.
     """
     warnings: list[str] = []
-    ids = _roof_ids(spec)
-    unknown = [p for p in ids if p not in points]
-    if unknown:
-        raise InputError(f"the roof names {'an unknown point' if len(unknown) == 1 else 'unknown points'} "
-                         + ", ".join(repr(p) for p in unknown), field="roofs")
-    no_cov: list[str] = []
-    pts = [_point(points, p, "roofs", no_cov) for p in ids]
-    xyz = np.array([p[0] for p in pts])
-    cov = np.array([p[1] for p in pts])
+    ids, xyz, cov, no_cov = _measured(spec, points)
     ground_crs, sigma_g = _resolve_ground(spec, points, ground_height, ground_sigma, no_cov)
     if no_cov:
         warnings.append(f"{len(no_cov)} point(s) without a covariance ({', '.join(no_cov[:5])}"

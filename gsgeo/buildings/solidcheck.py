@@ -86,13 +86,13 @@ def solid_problems(vertices: FloatArray, rings: Sequence[Sequence[int]],
     euler = len(used) - len(directed) // 2 + len(rings)
     if euler != 2:
         out.append(f"Euler characteristic {euler}, not 2: not one simple closed shell")
-    vol = 0.0
     centre = vertices[sorted(used)].mean(axis=0)
     x = vertices - centre
+    tris = np.array([(r[0], r[k], r[k + 1]) for r in rings for k in range(1, len(r) - 1)])
+    a, b, c3 = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
+    vol = float(np.einsum("ij,ij->", a, np.cross(b, c3))) / 6.0
     for f, ring in enumerate(rings):
         p = x[list(ring)]
-        for k in range(1, len(ring) - 1):
-            vol += float(np.dot(p[0], np.cross(p[k], p[k + 1]))) / 6.0
         c = p.mean(axis=0)
         u = np.linalg.svd(p - c)[2][-1]
         dev = float(np.abs((p - c) @ u).max())
