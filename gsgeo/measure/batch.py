@@ -642,8 +642,23 @@ def _finish_json(points: Sequence[BatchPoint], s: _Solved, source: str, point_ec
 
     origins, directions = per_point(r["origins"]), per_point(r["directions"])
     res_m, flags, excluded_all = per_point(r["res_m"]), per_point(r["flags"]), per_point(r["excluded"])
-    px_rows = s.optional["res_px"]
-    px_all = None if any(a is None for a in px_rows) else per_point(cast(list, px_rows))
+    px_rows, sol_rows = s.optional["res_px"], s.optional["sol_res_px"]
+    pxs = [a for a in px_rows if a is not None]
+    px_all = per_point(pxs) if len(pxs) == len(px_rows) else None
+    # the largest pixel residual of each solution, NaN where any is NaN (as np.max gives it)
+    sol_max: list[float | None] = [None] * len(sol_rows)
+    given = [a for a in sol_rows if a is not None]
+    if sol_rows and len(given) == len(sol_rows):
+        flat_sol = np.concatenate(given)
+        starts = np.concatenate([[0], np.cumsum([a.shape[0] for a in given])[:-1]])
+        top = np.maximum.reduceat(flat_sol, starts)  # NaN propagates
+        sol_max = top.tolist()
+    else:
+        sol_max = [None if a is None else largest(a.tolist()) for a in sol_rows]
+    grids = [a for a in origins_grid if a is not None]
+    grid_all = per_point(grids) if len(grids) == len(origins_grid) else None
+    ifovs = [f for f in (points[i][3].ifov for i in s.index.tolist()) if f is not None]
+    ifov_all = per_point(ifovs) if len(ifovs) == s.index.shape[0] else None
     for k, i in enumerate(s.index.tolist()):
         g = grid[k]
         if isinstance(g, GsgeoError):
@@ -655,7 +670,6 @@ def _finish_json(points: Sequence[BatchPoint], s: _Solved, source: str, point_ec
         res_px = s.optional["res_px"][k]
         px = (px_all[k] if px_all is not None else
               res_px.tolist() if res_px is not None else [None] * n)
-        sol_px = s.optional["sol_res_px"][k]
         og = origins_grid[k]
         rec: JSONObject = {
             "point_id": pid, "code": code, "description": description,
@@ -666,7 +680,7 @@ def _finish_json(points: Sequence[BatchPoint], s: _Solved, source: str, point_ec
             "cov_hh": None, "ellipse_major_95": None, "ellipse_minor_95": None,
             "ellipse_bearing_deg": None, "sigma0": sigma0[k], "n_rays": n - sum(excluded),
             "max_angle_deg": max_angle[k], "rms_m": rms[k],
-            "max_residual_px": None if sol_px is None else largest(sol_px.tolist()),
+            "max_residual_px": sol_max[k],
             "lon": None, "lat": None, "h_wgs84": None, "operation": None,
             "operation_accuracy_m": None, "measured_at": measured_at}
         warnings = s.before[k] + s.warnings[k] + s.notes[k]
@@ -686,13 +700,16 @@ def _finish_json(points: Sequence[BatchPoint], s: _Solved, source: str, point_ec
             warnings = warnings + g_warnings
         elif geo is not None:
             rec.update(lon=geo[0][k], lat=geo[1][k], h_wgs84=geo[2][k])
-        ifov = rays.ifov.tolist() if rays.ifov is not None else [None] * n
+        ifov = (ifov_all[k] if ifov_all is not None else
+                rays.ifov.tolist() if rays.ifov is not None else [None] * n)
+        og_rows = (grid_all[k] if grid_all is not None else
+                   og.tolist() if og is not None else [None] * n)
         rec["rays"] = [{"index": j, "origin_ecef": o, "direction_ecef": d, "origin_grid": og_j,
                         "ifov": f, "residual_px": rp, "residual_m": rm, "outlier": ol,
                         "excluded": ex}
                        for j, (o, d, og_j, f, rp, rm, ol, ex) in enumerate(zip(
                            origins[k], directions[k],
-                           og.tolist() if og is not None else [None] * n, ifov, px,
+                           og_rows, ifov, px,
                            res_m[k], flags[k], excluded, strict=True))]
         rec["warnings"] = warnings
         rec["source_crs"] = source
