@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -92,6 +93,24 @@ class BuildingModel:
     def surface_rings(self) -> list[tuple[str, FloatArray]]:
         """(kind, (k, 3) vertices in grid E, N, H) of each face, open rings, outward CCW."""
         return [(s.kind, self.vertices[list(s.ring)]) for s in self.surfaces]
+
+
+def plain(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays turned into Python numbers and lists (what
+    every JSON encoder takes)."""
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return plain(value.tolist())
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    return value
 
 
 def _roof_ids(spec: BuildingSpec) -> list[str]:
@@ -302,7 +321,8 @@ def build_building(spec: BuildingSpec, points: Points, ground_height: float | No
     vertices = verts / scale + origin
     return BuildingModel(id=spec.id, spec=spec, vertices=vertices,
                          vertex_ids=ids + [f"{ids[c]}@ground" for c in cs], surfaces=surfaces,
-                         adjustment=adjustment, measures=measures, warnings=warnings,
+                         adjustment=plain(adjustment), measures=plain(measures),
+                         warnings=warnings,
                          covariance=res.cov)
 
 
