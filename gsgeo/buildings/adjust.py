@@ -76,17 +76,23 @@ class Adjusted:
 
 
 def fit_plane(x: FloatArray, vertical: bool = False) -> FloatArray:
-    """A plane (u, d) through points ``x`` (k, 3) by orthogonal regression (starting values).
-    Roof planes get an upward normal; vertical planes a horizontal one."""
-    c = x.mean(axis=0)
+    """A plane (u, d) through points ``x`` (k, 3), starting values: a roof ring's Newell normal
+    (turned up); for a wall, the vertical plane through the chain's first and last points."""
+    c = x.sum(axis=0) / x.shape[0]
     if vertical:
-        vt = np.linalg.svd(x[:, :2] - c[:2])[2]
-        u = np.array([vt[-1, 0], vt[-1, 1], 0.0])
+        t = x[-1, :2] - x[0, :2]
+        u = np.array([-t[1], t[0], 0.0])
     else:
-        vt = np.linalg.svd(x - c)[2]
-        u = vt[-1].copy()
+        y = np.roll(x, -1, axis=0)
+        u = np.array([np.dot(x[:, 1] - y[:, 1], x[:, 2] + y[:, 2]),
+                      np.dot(x[:, 2] - y[:, 2], x[:, 0] + y[:, 0]),
+                      np.dot(x[:, 0] - y[:, 0], x[:, 1] + y[:, 1])])
         if u[2] < 0:
             u = -u
+    size = float(np.sqrt(u @ u))
+    if size == 0.0:
+        raise GeometryError("a face's points are collinear: it has no plane")
+    u = u / size
     return np.array([u[0], u[1], u[2], float(u @ c)], dtype=np.float64)
 
 
