@@ -4,6 +4,12 @@ With a grid CRS (``--crs`` or the session's ``crs``) every point goes through
 gsgeo.session.measure_session (gsgeo.measure.measure_points) and is printed as
 easting, northing, height with sigmas and the PROJ operation used; without one the points
 are printed in the rays' own frame.
+
+A session's LoD2 buildings (roof faces of its points, gsgeo.buildings) are built from the
+grid results; ``-o OUT.city.json`` (or ``--export-format cityjson``) writes them as CityJSON
+2.0, and a GeoPackage export holds their surfaces as a layer. A building that names a point
+the session does not have, or that cannot be built, stops the command (exit 2) before any file
+is written.
 """
 
 from __future__ import annotations
@@ -16,10 +22,11 @@ from pathlib import Path
 
 from gsgeo import limits
 from gsgeo.errors import GsgeoError, InputError
-from gsgeo.export.atomic import check_target
+from gsgeo.export.atomic import atomic_path, check_target
 from gsgeo.export.writer import FORMATS as EXPORT_FORMATS
 from gsgeo.export.writer import format_for, write_session_results
-from gsgeo.measure import MeasurementFailure
+from gsgeo.measure import Measurement, MeasurementFailure
+from gsgeo.service.buildings import building_model, dtm_beside, reference_crs
 from gsgeo.session import Session, load_session, measure_session
 from gsgeo.solve import SCALE_95_1D, intersect
 
@@ -48,12 +55,26 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         f"{limits.SIGMA_PX_MIN:g} to {limits.SIGMA_PX_MAX:g} "
                         "(overrides the session's sigma_px)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
-    p.add_argument("-o", "--output", default=None, metavar="OUT.gpkg|OUT.geojson|OUT.csv",
-                   help="also export points, rays, lines and polygons (format from the suffix; "
-                        "needs a grid CRS); written atomically")
-    p.add_argument("--export-format", default=None, choices=EXPORT_FORMATS,
-                   help="override the suffix; geojson-grid = legacy grid GeoJSON, not RFC 7946")
+    p.add_argument("-o", "--output", default=None,
+                   metavar="OUT.gpkg|OUT.geojson|OUT.csv|OUT.city.json",
+                   help="also export points, rays, lines, polygons and buildings (format from "
+                        "the suffix; .city.json: the buildings as CityJSON 2.0; needs a grid "
+                        "CRS); written atomically")
+    p.add_argument("--export-format", default=None, choices=(*EXPORT_FORMATS, CITYJSON),
+                   help="override the suffix; geojson-grid = legacy grid GeoJSON, not RFC 7946; "
+                        "cityjson = the session's buildings as CityJSON 2.0")
     p.set_defaults(run=run)
+
+
+CITYJSON = "cityjson"
+CITYJSON_SUFFIX = ".city.json"
+
+
+def _plain(value: object) -> object:
+    """JSON of numpy values in a building's dict (json.dump's default)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"not JSON: {type(value).__name__}")
 
 
 def solve_session(session: Session) -> list[dict]:
@@ -138,15 +159,80 @@ def _grid_table(results: list) -> tuple[str, list[str]]:
     return "\n".join(lines), warnings
 
 
+def is_cityjson(path: str, fmt: str | None) -> bool:
+    """Whether the export is CityJSON: ``--export-format cityjson``, or a name ending in
+    .city.json without a format given."""
+    if fmt is not None:
+        return str(fmt).lower().lstrip(".") == CITYJSON
+    return Path(path).name.lower().endswith(CITYJSON_SUFFIX)
+
+
 def check_output(path: str, fmt: str | None) -> Path:
     """The export target, checked before anything is solved: a known format (suffix or
     --export-format), an existing writable directory, and not a directory itself."""
-    format_for(path, fmt)
+    if not is_cityjson(path, fmt):
+        format_for(path, fmt)
     target = check_target(path)
     parent = target.parent if str(target.parent) else Path(".")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"cannot write {target}: the directory {parent} is not writable")
     return target
+
+
+def check_buildings(session: Session) -> None:
+    """Every point a building of the session names is a point of the session; InputError
+    naming the building, the face and the point otherwise (before anything is solved)."""
+    known = {p.id for p in session.points}
+    for i, b in enumerate(session.buildings):
+        at = f"buildings[{i}]"
+        for name, rings in (("roofs", b.roofs), ("walls", b.walls)):
+            for k, ring in enumerate(rings):
+                for j, q in enumerate(ring):
+                    if q not in known:
+                        raise InputError(f"building '{b.id}': point '{q}' is not a point of "
+                                         "the session", field=f"{at}.{name}[{k}][{j}]")
+        if b.ground.point_id is not None and b.ground.point_id not in known:
+            raise InputError(f"building '{b.id}': ground point '{b.ground.point_id}' is not "
+                             "a point of the session", field=f"{at}.ground")
+
+
+def build_session_buildings(session: Session, results: list, crs: str, vertical: str | None,
+                            session_file: Path) -> list:
+    """The models of the session's buildings from the grid results (a DTM is read relative to
+    the session file); the first that cannot be built raises, naming it."""
+    records = {m.point_id: (m.record() if isinstance(m, Measurement) else None)
+               for m in results}
+    models = []
+    for i, spec in enumerate(session.buildings):
+        try:
+            models.append(building_model(spec, records, crs, vertical, dtm_beside(session_file)))
+        except GsgeoError as exc:
+            err = exc.within(f"buildings[{i}]")  # a copy: its problem names the building
+            err.problem = f"building '{spec.id}': {err.problem}"
+            raise err from None
+    return models
+
+
+def _measure(ms: dict, key: str, unit: str = "") -> str:
+    """'value ± sigma unit' of a building's measure (3 decimals), '-' when unknown."""
+    v, s = ms.get(key), ms.get(f"sigma_{key}")
+    if v is None:
+        return "-"
+    return (f"{v:.3f}" + ("" if s is None else f" ± {s:.3f}") + (f" {unit}" if unit else ""))
+
+
+def _building_lines(models: list) -> list[str]:
+    """One line per building (roof type, volume, footprint, eaves and ridge H) and its
+    warnings; volumes m³, areas m², heights in the CRS's vertical units."""
+    lines = []
+    for b in models:
+        ms = b.measures
+        lines.append(f"building {b.id}: {ms.get('roof_type', '?')} roof, volume "
+                     f"{_measure(ms, 'volume', 'm³')}, footprint "
+                     f"{_measure(ms, 'footprint_area', 'm²')}, eaves H "
+                     f"{_measure(ms, 'eaves_height')}, ridge H {_measure(ms, 'ridge_height')}")
+        lines += [f"building {b.id}: warning: {w}" for w in b.warnings]
+    return lines
 
 
 def run(args: argparse.Namespace) -> int:
@@ -161,14 +247,22 @@ def run(args: argparse.Namespace) -> int:
     if geoid and not Path(geoid).is_file():  # once, before solving, not once per point
         raise InputError(f"--geoid {geoid}: "
                          + ("is a directory" if Path(geoid).is_dir() else "no such file"))
+    check_buildings(session)
     if getattr(args, "output", None):
         if not crs:
             raise InputError("-o/--output needs a grid CRS: give --crs (e.g. EPSG:27700)")
         check_output(args.output, getattr(args, "export_format", None))
+        if is_cityjson(args.output, getattr(args, "export_format", None)) \
+                and not session.buildings:
+            raise InputError("the session has no buildings to write as CityJSON",
+                             source=str(args.session))
     if crs:
         return _run_grid(args, session, crs)
     if getattr(args, "vertical", None) or getattr(args, "geoid", None):
         raise InputError("--vertical / --geoid need a grid CRS: give --crs (e.g. EPSG:27700)")
+    if session.buildings:
+        print("gsgeo solve: warning: buildings are built in a grid CRS only; give --crs "
+              "(e.g. EPSG:27700)", file=sys.stderr)
     results = solve_session(session)
     if args.json:
         json.dump({"points": results}, sys.stdout, indent=2)
@@ -186,16 +280,31 @@ def run(args: argparse.Namespace) -> int:
 def _run_grid(args: argparse.Namespace, session: Session, crs: str) -> int:
     results = measure_session(session, crs=crs, vertical=args.vertical, geoid=args.geoid,
                               source_crs=args.source_crs, sigma_px=session.sigma_px)
+    models = build_session_buildings(session, results, crs, args.vertical,
+                                     Path(args.session)) if session.buildings else []
     table, warnings = _grid_table(results)
     if args.json:
-        json.dump({"points": [m.to_dict() for m in results]}, sys.stdout, indent=2)
+        doc: dict = {"points": [m.to_dict() for m in results]}
+        if models:
+            doc["buildings"] = [b.to_dict() for b in models]
+        sys.stdout.write(json.dumps(doc, indent=2, default=_plain))
         sys.stdout.write("\n")
     else:
-        print(table)
+        print("\n".join([table, *_building_lines(models)]))
     for w in warnings:
         print(f"gsgeo solve: warning: {w}", file=sys.stderr)
     if getattr(args, "output", None):
-        out = write_session_results(args.output, results, session, fmt=args.export_format)
+        if is_cityjson(args.output, args.export_format):
+            from gsgeo.buildings.cityjson import city_json_bytes, reference_system_uri
+
+            data = city_json_bytes(models, reference_system_uri(reference_crs(
+                crs, args.vertical)))
+            with atomic_path(check_target(args.output)) as tmp:
+                tmp.write_bytes(data)
+            out = Path(args.output)
+        else:
+            out = write_session_results(args.output, results, session, fmt=args.export_format,
+                                        buildings=models)
         print(f"gsgeo solve: wrote {out}", file=sys.stderr)
     failed = [m.point_id for m in results if isinstance(m, MeasurementFailure)]
     if failed:

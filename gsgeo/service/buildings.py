@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 
 from gsgeo.buildings.model import BuildingModel, build_building
 from gsgeo.buildings.spec import BuildingSpec, building_to_json, parse_building, point_ids
@@ -100,6 +101,20 @@ def point_inputs(records: Mapping[str, JSONObject | None],
     return out
 
 
+def footprint(spec: BuildingSpec, pts: Mapping[str, tuple[np.ndarray, np.ndarray]]
+              ) -> np.ndarray:
+    """(k, 2) E, N of the outline of the roof faces seen from above, in order: the union of
+    the faces' plan polygons (shared edges share their points), its convex hull if the parts
+    do not join."""
+    import shapely
+
+    faces = [shapely.Polygon([pts[q][0][:2] for q in face]) for face in spec.roofs]
+    union = shapely.union_all([f if f.is_valid else f.buffer(0) for f in faces])
+    if union.geom_type != "Polygon":
+        union = union.convex_hull
+    return np.asarray(union.exterior.coords, dtype=float)[:-1]
+
+
 def building_model(spec: BuildingSpec, records: Mapping[str, JSONObject | None], crs: str,
                    vertical: str | None, dtm: DtmResolver) -> BuildingModel:
     """The model of ``spec`` from the points' records in the grid ``crs`` (+ ``vertical``):
@@ -113,9 +128,7 @@ def building_model(spec: BuildingSpec, records: Mapping[str, JSONObject | None],
         path = dtm(spec.ground.dtm)  # refused before anything is read
         from gsgeo.buildings.ground import dtm_ground
 
-        roof = [q for face in spec.roofs for q in face]
-        footprint = np.array([pts[q][0][:2] for q in dict.fromkeys(roof)], dtype=float)
-        height, sigma = dtm_ground(path, footprint, g.horizontal)
+        height, sigma = dtm_ground(path, footprint(spec, pts), g.horizontal)
     return build_building(spec, pts, ground_height=height, ground_sigma=sigma,
                           unit_m=g.unit_factor, vertical_unit_m=g.vertical_unit_factor)
 
@@ -224,7 +237,9 @@ class BuildingService:
             records = {pt.id: pt.record for pt in stored if pt is not None}
             model = building_model(spec, records, p.crs, p.vertical,
                                    dtm_in_data_dir(self.data_dir))
-        except (GsgeoError, np.linalg.LinAlgError) as exc:
+        except (GsgeoError, ValueError, ArithmeticError) as exc:
+            # ValueError / ArithmeticError: numbers the maths cannot take (numpy's LinAlgError
+            # among them), said as such rather than answered as an internal error
             if strict:
                 if isinstance(exc, GsgeoError):
                     raise
@@ -276,7 +291,13 @@ class BuildingService:
         if spec.ground.point_id is not None and spec.ground.point_id not in known:
             raise InputError(f"point '{spec.ground.point_id}' does not exist in project "
                              f"'{pid}'", field="ground")
-        return json_ready(building_to_json(spec))
+        out = building_to_json(spec)
+        try:  # what the store and every answer will write: UTF-8, 64-bit numbers, bounded depth
+            orjson.dumps(out)
+        except orjson.JSONEncodeError as exc:
+            raise InputError(f"cannot be kept as JSON: {exc} (text must be valid Unicode, "
+                             "integers within 64 bits)", field="attributes") from None
+        return json_ready(out)
 
     def add_building(self, pid: str, doc: JSON) -> JSONObject:
         """Check, build and store a building given in its session-JSON form (``id``

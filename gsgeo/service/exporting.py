@@ -1,9 +1,11 @@
-"""A project's points, lines, polygons and check points as a GeoPackage, GeoJSON or CSV file.
+"""A project's points, lines, polygons, buildings and check points as a GeoPackage, GeoJSON or
+CSV file, or its buildings as CityJSON 2.0.
 
 Stored results are exported as they are when the project's grid CRS is wanted; another CRS
 re-measures every point from its rays (rays are the source of truth). Lines and polygons
 whose measures cannot be computed (a failed point, a self-intersecting ring) are left out
-and named in the ``skipped`` list rather than failing the whole export.
+and named in the ``skipped`` list rather than failing the whole export; so are buildings that
+cannot be built (gsgeo.service.buildings), which the GeoPackage holds as a layer of surfaces.
 """
 
 from __future__ import annotations
@@ -11,10 +13,14 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+from gsgeo.buildings.model import BuildingModel
+from gsgeo.buildings.spec import parse_building
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.export import write_measurements
+from gsgeo.export.atomic import atomic_path
 from gsgeo.jsontypes import JSONObject
 from gsgeo.measure import Measurement
+from gsgeo.service.buildings import building_model, dtm_in_data_dir, reference_crs
 from gsgeo.service.measuring import measure, stored_rays
 from gsgeo.service.projects import (
     Projects,
@@ -23,7 +29,8 @@ from gsgeo.service.projects import (
     validate_settings,
 )
 
-SUFFIX = {"gpkg": ".gpkg", "geojson": ".geojson", "geojson-grid": ".geojson", "csv": ".csv"}
+SUFFIX = {"gpkg": ".gpkg", "geojson": ".geojson", "geojson-grid": ".geojson", "csv": ".csv",
+          "cityjson": ".city.json"}
 
 
 def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
@@ -59,11 +66,25 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
         grid_crs = project.crs
     if not measurements:
         raise InputError(f"project '{pid}' has no solved points to export")
+    models, skipped = project_buildings(svc, pid, by_id, grid_crs,
+                                        project.vertical if grid_crs == project.crs else None)
+    path = outdir / f"{pid}{SUFFIX[fmt]}"
+    if fmt == "cityjson":
+        if not models:
+            raise InputError(f"project '{pid}' has no buildings to export as CityJSON"
+                             + (f" ({'; '.join(skipped)})" if skipped else ""), field="format")
+        from gsgeo.buildings.cityjson import city_json_bytes, reference_system_uri
+
+        data = city_json_bytes(models, reference_system_uri(reference_crs(
+            grid_crs, project.vertical if grid_crs == project.crs else None)),
+            title=project.name)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(data)
+        return path, skipped
 
     proj = replace(project, crs=grid_crs,
                    vertical=project.vertical if grid_crs == project.crs else None)
     kept: dict[str, list[JSONObject]] = {"line": [], "polygon": []}
-    skipped: list[str] = []
     for kind in ("line", "polygon"):
         for f, _ in svc.list_features(pid, kind):
             ms = feature_measures(f, by_id, proj)
@@ -78,7 +99,21 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
         check = [{"id": c.id, "easting": float(x[0]), "northing": float(x[1]),
                   "height": None if x[2] != x[2] else float(x[2])} for c, x in zip(cps, xyz,
                                                                                   strict=True)]
-    path = outdir / f"{pid}{SUFFIX[fmt]}"
     write_measurements(path, measurements, lines=kept["line"], polygons=kept["polygon"],
-                       check_points=check, fmt=fmt)
+                       check_points=check, buildings=models, fmt=fmt)
     return path, skipped
+
+
+def project_buildings(svc: Projects, pid: str, records: dict[str, JSONObject | None],
+                      crs: str, vertical: str | None) -> tuple[list[BuildingModel], list[str]]:
+    """The project's buildings built from ``records`` (point id -> record in ``crs``), and
+    the descriptions of those that cannot be built (left out of an export)."""
+    models: list[BuildingModel] = []
+    skipped: list[str] = []
+    for b in svc.list_building_records(pid):
+        try:
+            models.append(building_model(parse_building(b.spec), records, crs, vertical,
+                                         dtm_in_data_dir(svc.data_dir)))
+        except GsgeoError as exc:
+            skipped.append(f"building {b.id}: {exc}")
+    return models, skipped
