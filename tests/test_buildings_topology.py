@@ -110,6 +110,9 @@ def test_the_outline_comes_from_ids_not_from_close_coordinates():
       ["O4", "O1", "I1", "I4"]],
      {"O1": (0, 0, 6), "O2": (12, 0, 6), "O3": (12, 12, 6), "O4": (0, 12, 6),
       "I1": (4, 4, 7), "I2": (8, 4, 7), "I3": (8, 8, 7), "I4": (4, 8, 7)}, "has a hole"),
+    # a face whose points are not in order around it
+    ([["E1", "R2", "E2", "R1"], ["E3", "E4", "R1", "R2"]], GABLE,
+     "roof face 0 (E1, R2, E2, R1) crosses itself in plan"),
     # two faces touching at one point only
     ([["A1", "A2", "P", "A4"], ["P", "B2", "B3", "B4"]],
      {"A1": (0, 0, 6), "A2": (5, 0, 6), "P": (5, 5, 6), "A4": (0, 5, 6),
@@ -119,6 +122,18 @@ def test_the_outline_comes_from_ids_not_from_close_coordinates():
 def test_broken_roofs_are_refused_with_a_clear_message(roofs, truth, needle):
     with pytest.raises(GeometryError, match=needle.replace("(", r"\(").replace(")", r"\)")):
         build(roofs, truth)
+
+
+def test_faces_may_be_given_either_way_round():
+    turned = [list(reversed(GABLE_ROOFS[0])), GABLE_ROOFS[1]]
+    a = build(GABLE_ROOFS, GABLE, seed=3)
+    b = build(turned, GABLE, seed=3)
+    va = dict(zip(a.vertex_ids, a.vertices, strict=True))
+    vb = dict(zip(b.vertex_ids, b.vertices, strict=True))
+    assert va.keys() == vb.keys()
+    assert all(np.allclose(va[k], vb[k], atol=1e-9) for k in va)
+    assert a.measures["volume"] == pytest.approx(b.measures["volume"], rel=1e-12)
+    assert_valid(b)
 
 
 def test_a_ground_above_the_eaves_is_refused():

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gsgeo.errors import GeometryError
+from gsgeo.measure.features import ring_self_intersection
 from gsgeo.solve.linalg import FloatArray
 
 #: A roof face steeper than this is refused as vertical (degrees).
@@ -96,6 +97,12 @@ def _orient_roofs(rings: Sequence[tuple[int, ...]], xyz: FloatArray,
                                 "must not be steeper than "
                                 f"{MAX_ROOF_SLOPE_DEG:g} degrees; give a vertical step between "
                                 "roof parts as a wall (\"walls\")")
+        hit = ring_self_intersection(xyz[list(ring), :2])
+        if hit is not None:
+            a, b = hit
+            raise GeometryError(f"{label} crosses itself in plan (its edges from "
+                                f"{ids[ring[a]]} and from {ids[ring[b]]} meet): give its points "
+                                "in order around the face")
         out.append(ring if nrm[2] > 0 else tuple(reversed(ring)))
         pitched.append(slope > FLAT_DEG)
     return out, pitched
