@@ -151,3 +151,28 @@ def test_footprint_is_the_outline_in_order():
     x, y = fp[:, 0], fp[:, 1]
     area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
     assert abs(area - 96) < 0.01
+
+
+def test_a_flat_box_and_a_shed():
+    box = {"C1": (0, 0, 4), "C2": (10, 0, 4), "C3": (10, 6, 4), "C4": (0, 6, 4)}
+    flat = build([["C1", "C2", "C3", "C4"]], box, seed=2)
+    assert abs(flat.measures["volume"] - 240) < 0.02 * 240
+    assert flat.measures["roof_type"] == "flat"
+    assert abs(flat.measures["eaves_height"] - flat.measures["ridge_height"]) < 0.05
+    assert len(named_rings(flat, "WallSurface")) == 4
+    assert_valid(flat)
+    shed_truth = {**box, "C3": (10, 6, 6), "C4": (0, 6, 6)}
+    shed = build([["C1", "C2", "C3", "C4"]], shed_truth, seed=2)
+    assert abs(shed.measures["volume"] - 300) < 0.02 * 300
+    assert shed.measures["roof_type"] == "shed"
+    assert abs(shed.measures["eaves_height"] - (GROUND + 4)) < 0.03
+    assert abs(shed.measures["ridge_height"] - (GROUND + 6)) < 0.03
+    assert abs(shed.measures["roof_slopes"][0]["aspect_deg"] - 180) < 1  # faces south
+    assert_valid(shed)
+
+
+def test_a_wall_that_is_not_vertical_is_refused():
+    truth = {**GABLE, "F1": (0, -4, 3), "F2": (12, -4, 3), "F3": (12, -1, 3), "F4": (0, -1, 3)}
+    with pytest.raises(GeometryError, match=r"wall 0 \(F4, F3, E2, E1\) is not vertical"):
+        build(GABLE_ROOFS + [["F1", "F2", "F3", "F4"]], truth,
+              walls=[["F4", "F3", "E2", "E1"]])
