@@ -1,4 +1,5 @@
-"""Monte-Carlo: the reported 1-sigma of volume, ridge, eaves and measured height are calibrated.
+"""Monte-Carlo: the reported 1-sigma of volume, ridge, eaves and measured height and footprint
+area are calibrated.
 
 1000 noisy measurements of one gable house (each roof point with its own correlated,
 anisotropic covariance; the ground a measured point too): the spread of each quantity across
@@ -35,9 +36,9 @@ def test_volume_and_height_sigmas_are_calibrated():
     cov = covariances(rng, list(truth))
     chol = {k: np.linalg.cholesky(c) for k, c in cov.items()}
     spec = parse_building({"id": "B1", "roofs": GABLE_ROOFS, "ground": "G"})
-    names = ("volume", "ridge_height", "eaves_height", "measured_height")
+    names = ("volume", "ridge_height", "eaves_height", "measured_height", "footprint_area")
     true_values = {"volume": GABLE_VOLUME, "ridge_height": GROUND + 9,
-                   "eaves_height": GROUND + 6, "measured_height": 9.0}
+                   "eaves_height": GROUND + 6, "measured_height": 9.0, "footprint_area": 96.0}
     values = {k: [] for k in names}
     sigmas = {k: [] for k in names}
     refused = 0
