@@ -328,3 +328,17 @@ def test_gdal_reads_the_buildings_collection(ogc_server):
                                  CRS="OGC:CRS84")
     lon, lat = c84.geometry.iloc[0].exterior.coords[0][:2]
     assert 0.0 < lon < 0.2 and 52.1 < lat < 52.3  # Cambridge
+
+
+def test_export_cityjson_in_another_crs_rebuilds_from_the_rays(client, pid, house):
+    r = client.get(f"/api/projects/{pid}/export",
+                   params={"format": "cityjson", "crs": "EPSG:32631"})
+    assert r.status_code == 200, r.text
+    doc = json.loads(r.content)
+    validate_city_json(doc)
+    assert doc["metadata"]["referenceSystem"].endswith("/EPSG/0/32631")
+    b = doc["CityObjects"]["B1"]["attributes"]
+    assert b["volume"] == pytest.approx(VOLUME, rel=0.02)
+    assert doc["transform"]["translate"][0] < 400_000  # UTM 31N eastings
+    # the project itself stays in its grid
+    assert client.get(f"/api/projects/{pid}/buildings/B1").json()["vertices"] == house["vertices"]

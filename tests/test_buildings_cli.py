@@ -171,3 +171,37 @@ def test_json_output_carries_the_buildings(tmp_path, capsys):
     doc = json.loads(capsys.readouterr().out)
     (b,) = doc["buildings"]
     assert b["id"] == "B1" and b["measures"]["volume"] == pytest.approx(VOLUME, rel=0.02)
+
+
+def write_flat_dtm(path, height: float) -> None:
+    """A 60 m x 60 m GeoTIFF (1 m pixels, EPSG:27700) at ``height`` around the house."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    e0, n0 = truth()["E1"][:2]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with rasterio.open(path, "w", driver="GTiff", width=60, height=60, count=1,
+                       dtype="float32", crs=CRS,
+                       transform=from_origin(e0 - 30, n0 + 30, 1.0, 1.0)) as ds:
+        ds.write(np.full((1, 60, 60), height, dtype="float32"))
+
+
+def test_a_dtm_ground_is_read_relative_to_the_session_file(tmp_path, monkeypatch):
+    write_flat_dtm(tmp_path / "terrain" / "dtm.tif", GROUND)
+    session = write(tmp_path, house_session(ground={"dtm": "terrain/dtm.tif"}))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    out = tmp_path / "out.city.json"
+    assert main(["solve", str(session), "--crs", CRS, "-o", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["CityObjects"]["B1"]["attributes"]["volume"] == pytest.approx(VOLUME, rel=0.02)
+
+
+def test_a_missing_dtm_exits_2_naming_it(tmp_path, capsys):
+    session = write(tmp_path, house_session(ground={"dtm": "nowhere.tif"}))
+    out = tmp_path / "out.city.json"
+    assert main(["solve", str(session), "--crs", CRS, "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "ground.dtm" in err and "nowhere.tif" in err
+    assert not out.exists()
