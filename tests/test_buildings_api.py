@@ -342,3 +342,12 @@ def test_export_cityjson_in_another_crs_rebuilds_from_the_rays(client, pid, hous
     assert doc["transform"]["translate"][0] < 400_000  # UTM 31N eastings
     # the project itself stays in its grid
     assert client.get(f"/api/projects/{pid}/buildings/B1").json()["vertices"] == house["vertices"]
+
+
+def test_formats_without_buildings_do_not_report_them_skipped(client, pid, house):
+    rng = np.random.default_rng(5)
+    x = grid_to_ecef((truth()["R1"] + [0.0, 0.0, 1.5])[None], SolveSettings(crs=CRS))[0]
+    client.patch(f"/api/projects/{pid}/points/R1",
+                 json={"rays": aim(rng, x, x / np.linalg.norm(x), 30.0)})
+    r = client.get(f"/api/projects/{pid}/export", params={"format": "csv"})
+    assert r.status_code == 200 and "x-gsgeo-skipped" not in r.headers

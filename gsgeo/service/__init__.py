@@ -3,7 +3,9 @@
 - ``projects``: :class:`Projects`, one transaction per call (projects, points, lines,
   polygons, check points, accuracy);
 - ``measuring``: a stored point's rays with a project's settings through gsgeo.measure;
-- ``exporting``: a project as a GeoPackage, GeoJSON or CSV file;
+- ``buildings``: LoD2 buildings of a project (the methods Projects inherits), built from the
+  points' current results when read; the same for a session's buildings;
+- ``exporting``: a project as a GeoPackage, GeoJSON or CSV file, its buildings as CityJSON;
 - ``checkpoints``: check-point files (CSV, GeoJSON, GeoPackage) read into rows;
 - ``validate``: ids and settings checks shared with the HTTP layer.
 

@@ -31,6 +31,8 @@ from gsgeo.service.projects import (
 
 SUFFIX = {"gpkg": ".gpkg", "geojson": ".geojson", "geojson-grid": ".geojson", "csv": ".csv",
           "cityjson": ".city.json"}
+#: The formats that hold buildings (GeoJSON and CSV do not).
+BUILDING_FORMATS = ("gpkg", "cityjson")
 
 
 def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
@@ -66,8 +68,11 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
         grid_crs = project.crs
     if not measurements:
         raise InputError(f"project '{pid}' has no solved points to export")
-    models, skipped = project_buildings(svc, pid, by_id, grid_crs,
-                                        project.vertical if grid_crs == project.crs else None)
+    models: list[BuildingModel] = []
+    skipped: list[str] = []
+    if fmt in BUILDING_FORMATS:
+        models, skipped = project_buildings(
+            svc, pid, by_id, grid_crs, project.vertical if grid_crs == project.crs else None)
     path = outdir / f"{pid}{SUFFIX[fmt]}"
     if fmt == "cityjson":
         if not models:
