@@ -68,7 +68,10 @@ class BuildingModel:
     closed shell (rings of vertex indices, outward normals). ``covariance`` (3n, 3n, m²): the
     joint covariance of the n adjusted roof vertices (E, N, H per vertex).
     ``adjustment``: {"corrections": {id: [dE, dN, dH] m}, "faces": [{"kind", "index",
-    "points", "rms" m, "chi2", "dof", "p"}], "sigma0", "chi2", "dof", "p", "iterations"}.
+    "points", "rms" m, "chi2", "dof", "p"}], "sigma0", "chi2", "dof", "p", "iterations"}: per
+    face the RMS of its vertices' corrections in the joint adjustment and its own planarity
+    test (chi-square of its points against their best plane, dof = points - 3); the whole
+    adjustment's chi-square, degrees of freedom, p-value and sigma0.
     ``measures``: see gsgeo.buildings.measures; heights absolute in CRS units.
     """
 
@@ -199,8 +202,10 @@ def _resolve_ground(spec: BuildingSpec, points: Points, ground_height: float | N
     return float(ground_height), float(sigma)
 
 
-def _face_tests(topo: Topology, l: FloatArray, cov: FloatArray, ids: list[str],
+def _face_tests(l: FloatArray, cov: FloatArray, ids: list[str],
                 spec: BuildingSpec) -> list[JSONObject]:
+    """Each face's own planarity test (its points against their best plane); GeometryError
+    naming the face and its worst point when p < P_REFUSE."""
     out: list[JSONObject] = []
     faces = [("roof face", "roofs", i, r, False) for i, r in enumerate(spec.roofs)]
     faces += [("wall", "walls", i, w, True) for i, w in enumerate(spec.walls)]
@@ -298,7 +303,7 @@ def build_building(spec: BuildingSpec, points: Points, ground_height: float | No
         raise GeometryError(f"the ground (H {ground_crs:.3f}) is not below the lowest roof "
                             f"point ({ids[int(np.argmin(l[:, 2]))]}, H "
                             f"{xyz[:, 2].min():.3f})", field="ground")
-    faces = _face_tests(topo, l, cov, ids, spec)
+    faces = _face_tests(l, cov, ids, spec)
     res = adjust(l, cov, _constraints(topo, spec, l, ids))
     _global_test(res, l, cov, ids)
     check_plan(topo, res.xyz, ids)
