@@ -351,3 +351,35 @@ def test_formats_without_buildings_do_not_report_them_skipped(client, pid, house
                  json={"rays": aim(rng, x, x / np.linalg.norm(x), 30.0)})
     r = client.get(f"/api/projects/{pid}/export", params={"format": "csv"})
     assert r.status_code == 200 and "x-gsgeo-skipped" not in r.headers
+
+
+def test_the_building_follows_a_georeference_change_of_its_scene(tmp_path):
+    """A scene's georeference applied outside the store (as `gsgeo georef --apply` on a
+    session does): the next read re-measures the points, and the building moves with them."""
+    from gsgeo.tiles.georefhistory import apply_similarity
+
+    data = tmp_path / "data"
+    scene = data / "scenes" / "site"
+    scene.mkdir(parents=True)
+    x0 = grid_to_ecef(truth()["E1"][None], SolveSettings(crs=CRS))[0]
+    root = np.eye(4)
+    root[:3, 3] = x0
+    (scene / "tileset.json").write_text(json.dumps(
+        {"asset": {"version": "1.1"}, "geometricError": 10,
+         "root": {"transform": root.T.reshape(-1).tolist(), "geometricError": 10,
+                  "boundingVolume": {"box": [0, 0, 0, 20, 0, 0, 0, 20, 0, 0, 0, 20]}}}))
+    with TestClient(create_app(ServerConfig(data_dir=data, allowed_hosts={"testserver"}))) as c:
+        r = c.post("/api/projects", json={"name": "s", "id": "s", "scene": "site", "crs": CRS})
+        assert r.status_code == 201, r.text
+        for p in house_points():
+            assert c.post("/api/projects/s/points", json=p).status_code == 201
+        before = c.post("/api/projects/s/buildings", json=HOUSE).json()
+        up = x0 / np.linalg.norm(x0)
+        lift = np.eye(4)
+        lift[:3, 3] = 2.0 * up  # the whole scene 2 m higher
+        apply_similarity(scene, lift, kind="test", frame_covariance=None, summary=None)
+        after = c.get("/api/projects/s/buildings/B1").json()
+    assert after["error"] is None
+    dh = np.array(after["vertices"])[:, 2] - np.array(before["vertices"])[:, 2]
+    assert np.allclose(dh[:6], 2.0, atol=0.01)  # the roof vertices
+    assert after["measures"]["volume"] == pytest.approx(VOLUME + 96 * 2.0, rel=0.02)
