@@ -206,6 +206,8 @@ BAD = [
     (HOUSE | {"regularise": ["square"]}, 422, ["regularise"]),
     (HOUSE | {"attributes": {"volume": 3}}, 422, ["attributes.volume"]),
     (HOUSE | {"colour": "red"}, 422, ["colour"]),
+    (HOUSE | {"roofs": [[f"Q{k}-{j}" for j in range(400)] for k in range(3)]}, 422,
+     ["at most 1000"]),
     (json.dumps(HOUSE | {"attributes": {"note": "\ud800"}}), 422, ["attributes", "Unicode"]),
     (HOUSE | {"attributes": {"n": 2**70}}, 422, ["attributes", "64 bits"]),
     (HOUSE | {"id": "a/b"}, 422, ["id"]),

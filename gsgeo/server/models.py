@@ -209,8 +209,8 @@ class GeoreferenceRequest(BaseModel):
                                                            "known distances")
 
 
-FaceIds = Annotated[list[ItemId], Field(max_length=1000)]
-Faces = Annotated[list[FaceIds], Field(max_length=1000)]
+FaceIds = Annotated[list[ItemId], Field(max_length=500)]
+Faces = Annotated[list[FaceIds], Field(max_length=500)]
 Regularise = Annotated[list[Literal["horizontal_eaves", "rectangular"]], Field(max_length=2)]
 GROUND_HELP = ("the ground: a height in the project's height system (number), a measured point "
                "id (text: its H), {\"height\": H, \"sigma\": m}, {\"point\": ID, \"sigma\": m} or "

@@ -39,6 +39,8 @@ from gsgeo.store.records import BuildingRecord, ConflictError, NotFoundError, Pr
 
 #: Directory of DTM GeoTIFFs inside the data directory.
 DTM_DIR = "dtm"
+#: Most distinct points one building may use (its adjustment is dense in them).
+MAX_BUILDING_POINTS = 1000
 #: Fields of a building that PATCH may change.
 BUILDING_FIELDS = ("id", "roofs", "walls", "ground", "attributes", "regularise")
 
@@ -282,6 +284,9 @@ class BuildingService:
         point it names measured in the project; InputError naming the field otherwise."""
         spec = parse_building(doc, "")
         item_id(spec.id, "id")
+        if len(point_ids(spec)) > MAX_BUILDING_POINTS:
+            raise InputError(f"uses {len(point_ids(spec))} points; a building may use at most "
+                             f"{MAX_BUILDING_POINTS}", field="roofs")
         known = set(tx.point_ids(pid))
         for i, face in enumerate(spec.roofs):
             for j, q in enumerate(face):
