@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gsgeo.buildings.spec import Ground, building_to_json, parse_building, point_ids
 from gsgeo.errors import InputError
@@ -74,3 +76,26 @@ def test_one_problem_names_its_field(doc, field, needle):
         parse_building(doc)
     assert err.value.field == field
     assert needle in err.value.problem
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-10, 10) | st.floats(allow_nan=True)
+    | st.text(max_size=4),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner,
+                                                                 max_size=4),
+    max_leaves=12)
+ids = st.sampled_from(["E1", "E2", "E3", "E4", "R1", "R2", "", " ", 3, None])
+
+
+@settings(max_examples=150, deadline=None)
+@given(doc=st.fixed_dictionaries(
+    {}, optional={"id": ids, "roofs": st.lists(st.lists(ids, max_size=5), max_size=3) | json_values,
+                  "ground": json_values | st.floats(), "walls": json_values,
+                  "attributes": json_values, "regularise": json_values, "extra": json_values}))
+def test_any_document_parses_or_is_refused_with_an_input_error(doc):
+    try:
+        spec = parse_building(doc)
+    except InputError as exc:
+        assert exc.problem and exc.field
+        return
+    assert parse_building(building_to_json(spec)) == spec

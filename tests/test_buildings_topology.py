@@ -7,12 +7,14 @@ import numpy as np
 import pytest
 from buildings_helpers import GABLE, GABLE_ROOFS, GABLE_VOLUME, GROUND, measured, true_grid
 from cityjson_helpers import validate_city_json
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gsgeo.buildings.cityjson import city_json
 from gsgeo.buildings.model import build_building, footprint_en
 from gsgeo.buildings.solidcheck import solid_problems
 from gsgeo.buildings.spec import parse_building
-from gsgeo.errors import GeometryError, InputError
+from gsgeo.errors import GeometryError, GsgeoError, InputError
 
 BNG = "https://www.opengis.net/def/crs/EPSG/0/27700"
 
@@ -176,3 +178,25 @@ def test_a_wall_that_is_not_vertical_is_refused():
     with pytest.raises(GeometryError, match=r"wall 0 \(F4, F3, E2, E1\) is not vertical"):
         build(GABLE_ROOFS + [["F1", "F2", "F3", "F4"]], truth,
               walls=[["F4", "F3", "E2", "E1"]])
+
+
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), sigma=st.sampled_from([0.001, 0.02, 0.3, 2.0]),
+       shuffle=st.booleans(), roll=st.integers(0, 3), extra=st.sampled_from(
+           [None, ["E1", "E2", "E3"], ["R1", "R2", "E2"], ["E1", "E4", "E3", "E2"]]))
+def test_any_measurement_builds_a_valid_solid_or_is_refused_clearly(seed, sigma, shuffle, roll,
+                                                                    extra):
+    rng = np.random.default_rng(seed)
+    roofs = [list(np.roll(GABLE_ROOFS[0], roll)), list(GABLE_ROOFS[1])]
+    if shuffle:
+        roofs[1] = [roofs[1][k] for k in rng.permutation(4)]
+    if extra:
+        roofs.append(extra)
+    try:
+        model = build(roofs, GABLE, sigma=sigma, seed=seed)
+    except GsgeoError as exc:
+        assert exc.problem
+        return
+    v = model.vertices - model.vertices.mean(axis=0)
+    assert solid_problems(v, [s.ring for s in model.surfaces], planarity_m=1e-5) == []
+    validate_city_json(city_json([model], BNG))

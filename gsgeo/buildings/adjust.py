@@ -238,17 +238,52 @@ class PlaneTest:
 
 
 def plane_test(l: FloatArray, cov: FloatArray, vertical: bool = False) -> PlaneTest:
-    """Fit one plane to the points ``l`` (k, 3; metres) weighted by ``cov`` (k, 3, 3; m²)."""
+    """Fit one plane to the points ``l`` (k, 3; metres) weighted by ``cov`` (k, 3, 3; m²).
+
+    The same Gauss-Helmert model as ``adjust`` with a single plane, the corrections eliminated:
+    each point's condition uᵀxᵢ - d = 0 gets the weight qᵢ = 1 / (uᵀΣᵢu), and the plane's
+    (u, d) is solved from a 4x4 system bordered by |u| = 1 (and u_z = 0 for a wall)."""
     k = l.shape[0]
-    res = adjust(l, cov, Constraints(planes=(PlaneSet(tuple(range(k)), vertical),)),
-                 covariance=False)
-    u, d = res.planes[0, :3], res.planes[0, 3]
+    par = fit_plane(l, vertical)
+    x = l.copy()
+    ncon = 2 if vertical else 1
+    dof = k - (2 if vertical else 3)
+    omega = 0.0
+    for _ in range(MAX_ITERATIONS):
+        u, d = par[:3], par[3]
+        q = 1.0 / np.maximum(np.einsum("i,nij,j->n", u, cov, u), 1e-300)
+        a = np.column_stack([x, -np.ones(k)])
+        w = l @ u - d
+        n = np.zeros((4 + ncon, 4 + ncon))
+        n[:4, :4] = (a * q[:, None]).T @ a
+        n[:3, 4] = n[4, :3] = u
+        rhs = np.zeros(4 + ncon)
+        rhs[:4] = -(a.T @ (q * w))
+        rhs[4] = 0.5 * (1.0 - float(u @ u))
+        if vertical:
+            n[2, 5] = n[5, 2] = 1.0
+            rhs[5] = -u[2]
+        try:
+            dp = np.linalg.solve(n, rhs)[:4]
+        except np.linalg.LinAlgError:
+            raise GeometryError("a face's points are collinear: it has no plane") from None
+        lam = q * (w + a @ dp)
+        v = -lam[:, None] * np.einsum("nij,j->ni", cov, u)
+        x = l + v
+        par = par + dp
+        omega = float(np.sum(q * (w + a @ dp) ** 2))
+        if float(np.abs(dp[:3]).max()) < TOLERANCE:
+            break
+    else:
+        raise GeometryError("the plane fit of a face does not converge")
+    u, d = par[:3], par[3]
     w = l @ u - d
     var = np.einsum("i,nij,j->n", u, cov, u)
     ratio = np.abs(w) / np.sqrt(np.maximum(var, 1e-300))
     worst = int(np.argmax(ratio))
-    rms = float(np.sqrt(np.mean(np.sum((res.xyz - l) ** 2, axis=1))))
-    return PlaneTest(chi2=res.omega, dof=res.dof, p=res.p, worst=worst, offset=float(w[worst]),
+    rms = float(np.sqrt(np.mean(np.sum((x - l) ** 2, axis=1))))
+    p = float(chi2_sf(omega, dof)) if dof > 0 else 1.0
+    return PlaneTest(chi2=omega, dof=dof, p=p, worst=worst, offset=float(w[worst]),
                      ratio=float(ratio[worst]), rms=rms)
 
 

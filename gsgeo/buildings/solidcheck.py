@@ -94,8 +94,15 @@ def solid_problems(vertices: FloatArray, rings: Sequence[Sequence[int]],
     for f, ring in enumerate(rings):
         p = x[list(ring)]
         c = p.mean(axis=0)
-        u = np.linalg.svd(p - c)[2][-1]
-        dev = float(np.abs((p - c) @ u).max())
+        q = np.roll(p, -1, axis=0)
+        u = np.array([np.dot(p[:, 1] - q[:, 1], p[:, 2] + q[:, 2]),
+                      np.dot(p[:, 2] - q[:, 2], p[:, 0] + q[:, 0]),
+                      np.dot(p[:, 0] - q[:, 0], p[:, 1] + q[:, 1])])  # Newell's normal
+        size = float(np.sqrt(u @ u))
+        if size == 0.0:
+            out.append(f"face {f} has no area")
+            continue
+        dev = float(np.abs((p - c) @ (u / size)).max())
         if dev > planarity_m:
             out.append(f"face {f} is not planar: a vertex is {dev:.2g} m off its plane")
     if vol <= 0:
