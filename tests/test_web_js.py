@@ -359,7 +359,8 @@ def test_building_capture_state_machine():
     message, nothing changes), a click on the face's first corner closes it too, Backspace
     removes the last corner and on an empty face reopens the previous one; Enter on an empty
     face without a ground is refused, with one POSTs {id, roofs, ground} (the next free id
-    B<n>, the ground a height or a point id) and returns to the default tool; Esc cancels."""
+    B<n>, the ground a height or a point id) and returns to the default tool; the server's
+    refusal is shown and keeps the faces; Esc cancels."""
     got = run_tools_js("""
 const solved = new Set(["E1", "E2", "E3", "E4", "R1", "R2"]);
 ctx.pointById = (id) => (solved.has(id) ? { id, result: { point_ecef: [1, 2, 3] } }
@@ -399,6 +400,12 @@ r.twoFaces = B();
 await tool.finish(ctx);
 r.noGround = [sent.length, state.mode, messages.splice(0)];
 document.querySelector("#bld-ground").value = " 10,25 ";
+const ok = globalThis.fetch;
+globalThis.fetch = async () => ({ ok: false, status: 422, statusText: "Unprocessable Entity",
+  json: async () => ({ message: "roof face 2 is not planar: B5 is 0.300 m off", field: "roofs" }) });
+await tool.finish(ctx);
+r.refused = [state.mode, B(), messages.splice(0)];
+globalThis.fetch = ok;
 await tool.finish(ctx);
 r.stored = [sent, state.mode, state.building, stored, messages.splice(0)];
 T.activate(ctx, "building");
@@ -420,6 +427,9 @@ console.log(JSON.stringify(r));""")
     assert got["twoFaces"] == {"faces": [face1, face2], "current": []}
     assert got["noGround"][:2] == [0, "building"]
     assert "Give the ground" in got["noGround"][2][0]
+    # the server's refusal is shown; the faces stay for the operator to fix
+    assert got["refused"] == ["building", {"faces": [face1, face2], "current": []},
+                              ["fail: roof face 2 is not planar: B5 is 0.300 m off"]]
     sent, mode, building, stored, msgs = got["stored"]
     assert sent == [{"url": "/api/projects/p/buildings", "method": "POST",
                      "body": {"id": "B2", "roofs": [face1, face2], "ground": 10.25}}]
