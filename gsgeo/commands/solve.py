@@ -222,8 +222,8 @@ def _measure(ms: dict, key: str, unit: str = "") -> str:
 
 
 def _building_lines(models: list) -> list[str]:
-    """One line per building (roof type, volume, footprint, eaves and ridge H) and its
-    warnings; volumes m³, areas m², heights in the CRS's vertical units."""
+    """One line per building (roof type, volume, footprint, eaves and ridge H); volumes m³,
+    areas m², heights in the CRS's vertical units."""
     lines = []
     for b in models:
         ms = b.measures
@@ -231,7 +231,6 @@ def _building_lines(models: list) -> list[str]:
                      f"{_measure(ms, 'volume', 'm³')}, footprint "
                      f"{_measure(ms, 'footprint_area', 'm²')}, eaves H "
                      f"{_measure(ms, 'eaves_height')}, ridge H {_measure(ms, 'ridge_height')}")
-        lines += [f"building {b.id}: warning: {w}" for w in b.warnings]
     return lines
 
 
@@ -291,6 +290,7 @@ def _run_grid(args: argparse.Namespace, session: Session, crs: str) -> int:
         sys.stdout.write("\n")
     else:
         print("\n".join([table, *_building_lines(models)]))
+    warnings += [f"building {b.id}: {w}" for b in models for w in b.warnings]
     for w in warnings:
         print(f"gsgeo solve: warning: {w}", file=sys.stderr)
     if getattr(args, "output", None):
