@@ -209,3 +209,12 @@ def test_a_missing_dtm_exits_2_naming_it(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "ground.dtm" in err and "nowhere.tif" in err
     assert not out.exists()
+
+
+def test_a_dtm_under_a_roof_without_plan_area_exits_2(tmp_path, capsys):
+    write_flat_dtm(tmp_path / "dtm.tif", GROUND)
+    vertical = [["E1", "R1", "E4"]]  # E1, E4 and R1 lie on one vertical gable line in plan
+    session = write(tmp_path, house_session(roofs=vertical, ground={"dtm": "dtm.tif"}))
+    assert main(["solve", str(session), "--crs", CRS]) == 2
+    err = capsys.readouterr().err
+    assert "B1" in err and "Traceback" not in err and "internal" not in err

@@ -112,8 +112,11 @@ def footprint(spec: BuildingSpec, pts: Mapping[str, tuple[np.ndarray, np.ndarray
 
     faces = [shapely.Polygon([pts[q][0][:2] for q in face]) for face in spec.roofs]
     union = shapely.union_all([f if f.is_valid else f.buffer(0) for f in faces])
-    if union.geom_type != "Polygon":
-        union = union.convex_hull
+    if union.geom_type != "Polygon" or union.area <= 0:
+        union = shapely.MultiPoint([p[0][:2] for p in pts.values()]).convex_hull
+    if union.geom_type != "Polygon" or union.area <= 0:
+        raise InputError("the roof faces cover no area seen from above: no footprint to "
+                         "sample the DTM under", field="roofs")
     return np.asarray(union.exterior.coords, dtype=float)[:-1]
 
 
