@@ -210,6 +210,9 @@ def build_session_buildings(session: Session, results: list, crs: str, vertical:
             err = exc.within(f"buildings[{i}]")  # a copy: its problem names the building
             err.problem = f"building '{spec.id}': {err.problem}"
             raise err from None
+        except (ValueError, ArithmeticError) as exc:  # numbers the maths cannot take
+            raise InputError(f"building '{spec.id}' cannot be built: {exc}",
+                             field=f"buildings[{i}]") from None
     return models
 
 
