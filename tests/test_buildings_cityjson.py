@@ -143,3 +143,20 @@ def test_a_crs_without_epsg_code_is_refused():
                                 "+y_0=-100000 +ellps=airy +units=m")
     with pytest.raises(InputError, match="no EPSG code"):
         reference_system_uri(crs)
+
+
+def test_the_solid_checks_name_what_is_wrong():
+    cube = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                     [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], dtype=float)
+    faces = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    assert solid_problems(cube, faces) == []
+    bowtie = [*faces[:1], (4, 5, 7, 6), *faces[2:]]
+    assert any("face 1 crosses itself" in p for p in solid_problems(cube, bowtie))
+    bent = cube.copy()
+    bent[6, 2] = 1.1
+    assert any("face 1 is not planar" in p for p in solid_problems(bent, faces))
+    assert any("not closed" in p for p in solid_problems(cube, faces[:-1]))
+    flipped = [faces[0][::-1], *faces[1:]]
+    assert any("runs the same way" in p for p in solid_problems(cube, flipped))
+    inward = [f[::-1] for f in faces]
+    assert any("inward" in p for p in solid_problems(cube, inward))

@@ -3,7 +3,8 @@ with planar faces. Run before a building is written; the tests use them too.
 
 ``solid_problems`` lists what is wrong (empty when the shell is valid):
 
-- every face has at least 3 distinct vertices and no repeated vertex;
+- every face has at least 3 distinct vertices and no repeated vertex, and its boundary
+  neither touches nor crosses itself;
 - every edge is used by exactly two faces, once in each direction (closed, no dangling or
   folded faces, orientation consistent);
 - around every vertex the faces form one single fan (vertex 2-manifold);
@@ -19,6 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from gsgeo.errors import GeometryError
+from gsgeo.measure.features import ring_self_intersection
 from gsgeo.solve.linalg import FloatArray
 
 #: Largest distance (m) of a face's vertex from the face's best plane.
@@ -54,6 +56,19 @@ def _fans_are_single(rings: Sequence[Sequence[int]]) -> list[int]:
     return bad
 
 
+def _crosses_itself(p: FloatArray) -> bool:
+    """Whether the (planar) ring ``p`` (k, 3) touches or crosses itself, tested in the
+    coordinate plane its normal is closest to."""
+    q = p - p.mean(axis=0)
+    r = np.roll(q, -1, axis=0)
+    normal = np.array([np.dot(q[:, 1] - r[:, 1], q[:, 2] + r[:, 2]),
+                       np.dot(q[:, 2] - r[:, 2], q[:, 0] + r[:, 0]),
+                       np.dot(q[:, 0] - r[:, 0], q[:, 1] + r[:, 1])])
+    drop = int(np.argmax(np.abs(normal)))
+    keep = [k for k in range(3) if k != drop]
+    return ring_self_intersection(q[:, keep]) is not None
+
+
 def solid_problems(vertices: FloatArray, rings: Sequence[Sequence[int]],
                    planarity_m: float = PLANARITY_M) -> list[str]:
     """What keeps ``rings`` over ``vertices`` (V, 3, metres) from being a valid solid."""
@@ -66,6 +81,9 @@ def solid_problems(vertices: FloatArray, rings: Sequence[Sequence[int]],
             out.append(f"face {f} names a vertex that does not exist")
     if out:
         return out
+    for f, ring in enumerate(rings):
+        if _crosses_itself(vertices[list(ring)]):
+            out.append(f"face {f} crosses itself (its boundary touches or crosses itself)")
     directed: dict[tuple[int, int], int] = {}
     for f, ring in enumerate(rings):
         for i, a in enumerate(ring):
