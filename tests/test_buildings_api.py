@@ -16,6 +16,8 @@ import pytest
 from building_helpers import CRS, GROUND, ROOFS, VOLUME, house_points, house_session, truth
 from cityjson_helpers import validate_city_json
 from georef_helpers import aim
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from servertools import start_server
 
 from gsgeo.export.tables import BUILDING_TYPES
@@ -385,3 +387,37 @@ def test_the_building_follows_a_georeference_change_of_its_scene(tmp_path):
     dh = np.array(after["vertices"])[:, 2] - np.array(before["vertices"])[:, 2]
     assert np.allclose(dh[:6], 2.0, atol=0.01)  # the roof vertices
     assert after["measures"]["volume"] == pytest.approx(VOLUME + 96 * 2.0, rel=0.02)
+
+
+# fuzz: whatever a building names, the answer is a model or a 4xx naming the problem ----------
+@pytest.fixture(scope="module")
+def fuzz_client(tmp_path_factory):
+    data = tmp_path_factory.mktemp("bfuzz") / "data"
+    with TestClient(create_app(ServerConfig(data_dir=data, allowed_hosts={"testserver"}))) as c:
+        c.post("/api/projects", json={"name": "fuzz", "id": "f", "crs": CRS})
+        for p in house_points():
+            assert c.post("/api/projects/f/points", json=p).status_code == 201
+        yield c
+
+
+IDS = ["E1", "E2", "E3", "E4", "R1", "R2", "X9"]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+@given(roofs=st.lists(st.lists(st.sampled_from(IDS), min_size=0, max_size=6), min_size=0,
+                      max_size=4),
+       ground=st.one_of(st.floats(allow_nan=False, allow_infinity=False),
+                        st.sampled_from(IDS),
+                        st.fixed_dictionaries({"height": st.floats(-1e3, 1e3),
+                                               "sigma": st.floats(0, 1e300)}),
+                        st.just({"dtm": "none.tif"})),
+       regularise=st.lists(st.sampled_from(["horizontal_eaves", "rectangular"]), max_size=2,
+                           unique=True))
+def test_any_building_is_a_model_or_a_named_refusal(fuzz_client, roofs, ground, regularise):
+    body = {"id": "F", "roofs": roofs, "ground": ground, "regularise": regularise}
+    r = fuzz_client.post("/api/projects/f/buildings", json=body)
+    assert r.status_code in (201, 422), r.text
+    if r.status_code == 201:
+        assert fuzz_client.delete("/api/projects/f/buildings/F").status_code == 204
+    else:
+        assert r.json()["message"]
