@@ -162,3 +162,17 @@ def test_points_without_covariance_get_a_default_sigma_and_a_warning():
     pts = {k: (v[0], None) for k, v in measured(GABLE, 0.01, rng).items()}
     model = build_building(spec(GABLE_ROOFS), pts)
     assert any("without a covariance" in w and "0.05 m" in w for w in model.warnings)
+
+
+def test_a_crs_in_feet_gives_metric_volume_and_heights_in_feet():
+    ft = 0.3048006096012192  # US survey foot
+    rng = np.random.default_rng(6)
+    pts = {k: (xyz / ft, cov) for k, (xyz, cov) in measured(GABLE, 0.01, rng).items()}
+    spec_ft = parse_building({"id": "B1", "roofs": GABLE_ROOFS, "ground": GROUND / ft})
+    model = build_building(spec_ft, pts, unit_m=ft, vertical_unit_m=ft)
+    assert abs(model.measures["volume"] - GABLE_VOLUME) < 0.01 * GABLE_VOLUME  # m³
+    assert abs(model.measures["footprint_area"] - 96) < 0.01 * 96  # m²
+    assert abs(model.measures["measured_height"] - 9 / ft) < 0.05 / ft  # CRS units (feet)
+    assert abs(model.measures["sigma_ridge_height"] * ft - 0.01 / np.sqrt(2)) < 0.005
+    for s in model.measures["roof_slopes"]:
+        assert abs(s["slope_deg"] - np.degrees(np.arctan2(3, 4))) < 1.0
