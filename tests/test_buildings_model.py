@@ -146,7 +146,7 @@ def test_the_worst_point_is_the_one_that_is_off():
 
 def test_a_hip_roof():
     rng = np.random.default_rng(11)
-    model = build_building(spec(HIP_ROOFS), measured(HIP, 0.02, rng))
+    model = build_building(spec(HIP_ROOFS), measured(HIP, 0.015, rng))
     assert abs(model.measures["volume"] - HIP_VOLUME) < 0.02 * HIP_VOLUME
     for pid, xyz in true_grid(HIP).items():
         assert np.linalg.norm(roof_vertex(model, pid) - xyz) < 0.05, pid
