@@ -176,3 +176,29 @@ def test_a_crs_in_feet_gives_metric_volume_and_heights_in_feet():
     assert abs(model.measures["sigma_ridge_height"] * ft - 0.01 / np.sqrt(2)) < 0.005
     for s in model.measures["roof_slopes"]:
         assert abs(s["slope_deg"] - np.degrees(np.arctan2(3, 4))) < 1.0
+
+
+@pytest.mark.parametrize("change, needle", [
+    (lambda xyz, cov: (xyz * 1e150, cov), "lies outside any grid"),
+    (lambda xyz, cov: (xyz, np.array([[1, 2, 0], [2, 1, 0], [0, 0, 1.0]]) * 1e-4),
+     "not positive semi-definite"),
+    (lambda xyz, cov: (xyz, cov * 1e210), "is no measurement"),
+    (lambda xyz, cov: (xyz, np.full((3, 3), np.nan)), "not finite"),
+    (lambda xyz, cov: (np.array([xyz[0], xyz[1], np.nan]), cov), "has no height"),
+    (lambda xyz, cov: ([1.0, 2.0], cov), "no usable coordinates"),
+])
+def test_unusable_points_are_refused_naming_them(change, needle):
+    pts = measured(GABLE, 0.01, np.random.default_rng(1))
+    pts["R1"] = change(*pts["R1"])
+    with pytest.raises(InputError, match=needle) as err:
+        build_building(spec(GABLE_ROOFS), pts)
+    assert "'R1'" in err.value.problem or "'E1'" in err.value.problem
+    assert err.value.field == "roofs"
+
+
+def test_a_building_kilometres_wide_is_refused():
+    pts = measured(GABLE, 0.01, np.random.default_rng(1))
+    xyz, cov = pts["E2"]
+    pts["E2"] = (xyz + np.array([30000.0, 0, 0]), cov)
+    with pytest.raises(InputError, match="a building is at most"):
+        build_building(spec(GABLE_ROOFS), pts)

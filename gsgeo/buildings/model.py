@@ -52,6 +52,12 @@ P_REFUSE = 0.001
 DEFAULT_SIGMA_M = 0.05
 #: Variance floor (m²) added to a covariance too small to invert (a point typed in exactly).
 VARIANCE_FLOOR_M2 = 1e-8
+#: Largest |E|, |N|, |H| of a point (CRS units): beyond it no grid of the Earth.
+MAX_COORDINATE = 1e9
+#: Largest variance (m²) of a point's coordinate (a 1-sigma of 10 km).
+MAX_VARIANCE_M2 = 1e8
+#: Largest extent of a building (m).
+MAX_EXTENT_M = 10_000.0
 #: A right angle of ``rectangular`` may be off by this much before the constraint (degrees).
 RECTANGULAR_TOLERANCE_DEG = 15.0
 
@@ -135,6 +141,9 @@ def _point(points: Points, pid: str, fld: str, warn_missing: list[str]
     if not np.all(np.isfinite(xyz)):
         raise InputError(f"point {pid!r} has no height or a coordinate that is not a number: "
                          "a roof needs 3-D points", field=fld)
+    if float(np.abs(xyz).max()) > MAX_COORDINATE:
+        raise InputError(f"point {pid!r} lies outside any grid ({float(np.abs(xyz).max()):.3g} "
+                         f"units from the origin, more than {MAX_COORDINATE:g})", field=fld)
     if cov_raw is None:
         warn_missing.append(pid)
         return xyz, np.eye(3) * DEFAULT_SIGMA_M ** 2
@@ -146,7 +155,14 @@ def _point(points: Points, pid: str, fld: str, warn_missing: list[str]
         raise InputError(f"point {pid!r}: its covariance is not finite or has a negative "
                          "variance", field=fld)
     cov = 0.5 * (cov + cov.T)
-    if float(np.linalg.eigvalsh(cov).min()) < VARIANCE_FLOOR_M2:
+    if float(np.abs(cov).max()) > MAX_VARIANCE_M2:
+        raise InputError(f"point {pid!r}: a variance above {MAX_VARIANCE_M2:g} m² is no "
+                         "measurement", field=fld)
+    low = float(np.linalg.eigvalsh(cov).min())
+    if low < -1e-9 * max(float(np.abs(cov).max()), 1e-300):
+        raise InputError(f"point {pid!r}: its covariance is not positive semi-definite "
+                         "(a correlation beyond ±1)", field=fld)
+    if low < VARIANCE_FLOOR_M2:
         cov = cov + np.eye(3) * VARIANCE_FLOOR_M2
     return xyz, cov
 
@@ -293,7 +309,14 @@ def build_building(spec: BuildingSpec, points: Points, ground_height: float | No
     scale = np.array([unit_m, unit_m, vertical_unit_m])
     origin = xyz.mean(axis=0)
     l = (xyz - origin) * scale
+    extent = float(np.abs(l).max())
+    if extent > MAX_EXTENT_M:
+        raise InputError(f"the roof points spread over {2 * extent:.0f} m: a building is at "
+                         f"most {MAX_EXTENT_M:g} m across", field="roofs")
     ground = (ground_crs - origin[2]) * vertical_unit_m
+    if abs(ground) > MAX_EXTENT_M:
+        raise GeometryError(f"the ground (H {ground_crs:.3f}) is more than {MAX_EXTENT_M:g} m "
+                            "from the roof", field="ground")
     index = {p: k for k, p in enumerate(ids)}
     roof_rings = [tuple(index[p] for p in r) for r in spec.roofs]
     wall_rings = [tuple(index[p] for p in w) for w in spec.walls]
