@@ -166,6 +166,22 @@ def patch(img: np.ndarray, xy, r: int = 2) -> np.ndarray:
     return np.median(img[y - r:y + r + 1, x - r:x + r + 1].reshape(-1, 3), axis=0)
 
 
+def overlay_shots(page) -> tuple[np.ndarray, bytes, np.ndarray]:
+    """The page without the measuring overlay (pixels), with it (PNG), and without it again."""
+    hide = "(v) => { document.querySelector('canvas.gsgeo-overlay').style.visibility = v; }"
+    page.evaluate(hide, "hidden")
+    page.wait_for_timeout(300)
+    bare = pixels(page.screenshot(timeout=90_000))
+    page.evaluate(hide, "")
+    page.wait_for_timeout(300)
+    shown = page.screenshot(timeout=90_000)
+    page.evaluate(hide, "hidden")
+    page.wait_for_timeout(300)
+    after = pixels(page.screenshot(timeout=90_000))
+    page.evaluate(hide, "")
+    return bare, shown, after
+
+
 def solid_volume(vertices: np.ndarray, shell: list[list[list[int]]]) -> float:
     """Volume of a closed shell of planar rings (outward) by the divergence theorem."""
     v = 0.0
@@ -260,7 +276,12 @@ def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
     assert np.all(np.abs(verts[g[0]][:, 2] - ground) < 0.002), verts[g[0]]
     vol = solid_volume(verts, shell)
     assert abs(vol - VOLUME) < 0.03 * VOLUME, vol
-    assert abs(made["measures"]["volume"] - vol) < 1e-3 * vol, (made["measures"], vol)
+    ms = made["measures"]
+    assert abs(ms["volume"] - vol) < 1e-3 * vol, (ms, vol)
+    assert ms["roof_type"] == "gable", ms
+    assert abs(ms["eaves_height"] - t["B1"].height) < POINT_TOL, ms
+    assert abs(ms["ridge_height"] - t["B5"].height) < POINT_TOL, ms
+    assert abs(ms["footprint_area"] - 70.0) < 0.01, ms
 
     # the model is drawn at its true place: seen from above, the roof faces show their colour
     # over what is under them (the ground face, then the scene), and nothing changes outside
@@ -268,26 +289,26 @@ def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
     page.keyboard.press("Escape")
     page.wait_for_function("gsgeo.state.selected === null")
     aim(page, centre, (0.0, 89.0, 40.0, [0.0, 0.0, 0.0]))
-    drawn_settled = settle(page)
-    shown_png = page.screenshot(timeout=90_000)
-    shown = pixels(shown_png)
-    page.evaluate("document.querySelector('canvas.gsgeo-overlay').style.visibility = 'hidden'")
-    page.wait_for_timeout(300)
-    bare = pixels(page.screenshot(timeout=90_000))
-    page.evaluate("document.querySelector('canvas.gsgeo-overlay').style.visibility = ''")
-    if not drawn_settled:
-        warnings.warn("the splats were not all drawn in time; the pixel check may be loose",
-                      stacklevel=1)
+    if not settle(page):
+        warnings.warn("the splats were not all drawn in time; the pixel check waits for a steady "
+                      "picture instead", stacklevel=1)
+    mids = [window_of(page, np.mean([t[c].ecef for c in face], axis=0)) for face in (SOUTH, NORTH)]
+    outside = window_of(page, place.local_to_ecef(np.array([[0.0, -6.0, 0.0]]))[0])
+    for _ in range(5):  # the scene without the overlay before and after: it did not change
+        bare, shown_png, after = overlay_shots(page)
+        shown = pixels(shown_png)
+        if all(np.all(np.abs(patch(bare, xy) - patch(after, xy)) < 3) for xy in [*mids, outside]):
+            break
+        page.wait_for_timeout(2000)
+    else:
+        pytest.fail("the scene did not hold still for the pixel check")
     roof_rgb, roof_a = np.array(ROOF_RGBA[:3]), ROOF_RGBA[3]
     ground_rgb, ground_a = np.array(GROUND_RGBA[:3]), GROUND_RGBA[3]
-    for face in (SOUTH, NORTH):
-        mid = np.mean([t[c].ecef for c in face], axis=0)
-        xy = window_of(page, mid)
+    for face, xy in zip((SOUTH, NORTH), mids, strict=True):
         under = ground_a * ground_rgb + (1 - ground_a) * patch(bare, xy)
         expect = roof_a * roof_rgb + (1 - roof_a) * under
         got = patch(shown, xy)
         assert np.all(np.abs(got - expect) < 14), (face, got, expect, patch(bare, xy))
-    outside = window_of(page, place.local_to_ecef(np.array([[0.0, -6.0, 0.0]]))[0])
     assert np.all(np.abs(patch(shown, outside) - patch(bare, outside)) < 6)
 
     # for people: the model over the scene from the south-east
