@@ -122,8 +122,9 @@ def test_the_outline_comes_from_ids_not_from_close_coordinates():
      "not one simple loop: it passes through point P twice"),
 ])
 def test_broken_roofs_are_refused_with_a_clear_message(roofs, truth, needle):
-    with pytest.raises(GeometryError, match=needle.replace("(", r"\(").replace(")", r"\)")):
+    with pytest.raises(GeometryError, match=needle.replace("(", r"\(").replace(")", r"\)")) as err:
         build(roofs, truth)
+    assert err.value.field.startswith("roofs")
 
 
 def test_faces_may_be_given_either_way_round():
@@ -175,9 +176,10 @@ def test_a_flat_box_and_a_shed():
 
 def test_a_wall_that_is_not_vertical_is_refused():
     truth = {**GABLE, "F1": (0, -4, 3), "F2": (12, -4, 3), "F3": (12, -1, 3), "F4": (0, -1, 3)}
-    with pytest.raises(GeometryError, match=r"wall 0 \(F4, F3, E2, E1\) is not vertical"):
+    with pytest.raises(GeometryError, match=r"wall 0 \(F4, F3, E2, E1\) is not vertical") as err:
         build(GABLE_ROOFS + [["F1", "F2", "F3", "F4"]], truth,
               walls=[["F4", "F3", "E2", "E1"]])
+    assert err.value.field == "walls[0]"
 
 
 @settings(max_examples=80, deadline=None)

@@ -320,7 +320,10 @@ def build_building(spec: BuildingSpec, points: Points, ground_height: float | No
     index = {p: k for k, p in enumerate(ids)}
     roof_rings = [tuple(index[p] for p in r) for r in spec.roofs]
     wall_rings = [tuple(index[p] for p in w) for w in spec.walls]
-    topo = build_topology(roof_rings, wall_rings, l, cov, ids)
+    try:
+        topo = build_topology(roof_rings, wall_rings, l, cov, ids)
+    except GeometryError as exc:
+        raise exc if exc.field else exc.at("roofs") from None
     lowest = float(l[:, 2].min())
     if ground >= lowest:
         raise GeometryError(f"the ground (H {ground_crs:.3f}) is not below the lowest roof "
@@ -329,7 +332,10 @@ def build_building(spec: BuildingSpec, points: Points, ground_height: float | No
     faces = _face_tests(l, cov, ids, spec)
     res = adjust(l, cov, _constraints(topo, spec, l, ids))
     _global_test(res, l, cov, ids)
-    check_plan(topo, res.xyz, ids)
+    try:
+        check_plan(topo, res.xyz, ids)
+    except GeometryError as exc:
+        raise exc.at("roofs") from None
     surfaces = shell_surfaces(topo, len(ids))
     verts = shell_vertices(res.xyz, topo, ground)
     check_solid(verts, [s.ring for s in surfaces], f"building {spec.id!r}")

@@ -90,19 +90,20 @@ def _orient_roofs(rings: Sequence[tuple[int, ...]], xyz: FloatArray,
         size = float(np.linalg.norm(nrm))
         label = face_label("roof face", i, [ids[k] for k in ring])
         if size == 0.0 or not math.isfinite(size):
-            raise GeometryError(f"{label} has no area: its points are collinear")
+            raise GeometryError(f"{label} has no area: its points are collinear",
+                                field=f"roofs[{i}]")
         slope = math.degrees(math.acos(min(1.0, abs(nrm[2]) / size)))
         if slope > MAX_ROOF_SLOPE_DEG:
             raise GeometryError(f"{label} is vertical (slope {slope:.0f} degrees): a roof face "
                                 "must not be steeper than "
                                 f"{MAX_ROOF_SLOPE_DEG:g} degrees; give a vertical step between "
-                                "roof parts as a wall (\"walls\")")
+                                "roof parts as a wall (\"walls\")", field=f"roofs[{i}]")
         hit = ring_self_intersection(xyz[list(ring), :2])
         if hit is not None:
             a, b = hit
             raise GeometryError(f"{label} crosses itself in plan (its edges from "
                                 f"{ids[ring[a]]} and from {ids[ring[b]]} meet): give its points "
-                                "in order around the face")
+                                "in order around the face", field=f"roofs[{i}]")
         out.append(ring if nrm[2] > 0 else tuple(reversed(ring)))
         pitched.append(slope > FLAT_DEG)
     return out, pitched
@@ -118,11 +119,12 @@ def _check_vertical_wall(i: int, ring: tuple[int, ...], xyz: FloatArray,
     size = float(np.linalg.norm(nrm))
     label = face_label("wall", i, [ids[k] for k in ring])
     if size == 0.0:
-        raise GeometryError(f"{label} has no area: its points are collinear")
+        raise GeometryError(f"{label} has no area: its points are collinear",
+                            field=f"walls[{i}]")
     tilt = math.degrees(math.asin(min(1.0, abs(nrm[2]) / size)))
     if tilt > 90.0 - MAX_ROOF_SLOPE_DEG:
         raise GeometryError(f"{label} is not vertical (it leans {tilt:.0f} degrees from the "
-                            "vertical): give sloping faces as roofs")
+                            "vertical): give sloping faces as roofs", field=f"walls[{i}]")
 
 
 def build_topology(roof_rings: Sequence[tuple[int, ...]], wall_rings: Sequence[tuple[int, ...]],
@@ -154,7 +156,8 @@ def build_topology(roof_rings: Sequence[tuple[int, ...]], wall_rings: Sequence[t
         against = sum(1 for a, b in es if (b, a) in owner)
         label = face_label("wall", i, [ids[k] for k in ring])
         if same == 0 and against == 0:
-            raise GeometryError(f"{label} shares no edge with the roof faces")
+            raise GeometryError(f"{label} shares no edge with the roof faces",
+                                field=f"walls[{i}]")
         if same > against:
             ring = tuple(reversed(ring))
         for e in _edges(ring):
