@@ -202,3 +202,12 @@ def test_a_building_kilometres_wide_is_refused():
     pts["E2"] = (xyz + np.array([30000.0, 0, 0]), cov)
     with pytest.raises(InputError, match="a building is at most"):
         build_building(spec(GABLE_ROOFS), pts)
+
+
+def test_an_absurd_ground_is_refused_as_input():
+    pts = measured(GABLE, 0.01, np.random.default_rng(1))
+    with pytest.raises(InputError, match="sigma must be between") as err:
+        build_building(spec(GABLE_ROOFS), pts, ground_height=GROUND, ground_sigma=1e300)
+    assert err.value.field == "ground"
+    with pytest.raises(InputError, match="not a finite number") as err:
+        build_building(spec(GABLE_ROOFS), pts, ground_height=1e300)

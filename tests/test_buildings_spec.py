@@ -63,7 +63,9 @@ def test_every_problem_is_named_at_once():
     ({"id": "B", "roofs": [["a", "b", "c"]], "ground": True}, "building.ground",
      "expected a height"),
     ({"id": "B", "roofs": [["a", "b", "c"]], "ground": {"height": 1, "sigma": -1}},
-     "building.ground.sigma", "must not be negative"),
+     "building.ground.sigma", "must be between 0 and 1000 m"),
+    ({"id": "B", "roofs": [["a", "b", "c"]], "ground": {"height": 1, "sigma": 1e300}},
+     "building.ground.sigma", "must be between 0 and 1000 m"),
     ({"id": "B", "roofs": [["a", "b", "c"]], "ground": 1, "attributes": {"volume": 3}},
      "building.attributes.volume", "computed by gsgeo"),
     ({"id": "B", "roofs": [["a", "b", "c"]], "ground": 1, "walls": [["a", "b", "x"]]},
@@ -99,3 +101,13 @@ def test_any_document_parses_or_is_refused_with_an_input_error(doc):
         assert exc.problem and exc.field
         return
     assert parse_building(building_to_json(spec)) == spec
+
+
+def test_an_api_body_parsed_at_the_root_names_fields_without_a_prefix():
+    with pytest.raises(InputError) as err:
+        parse_building({"id": "B", "roofs": [["a", "b", "c"], ["a", "b", ""]], "ground": 1}, "")
+    assert err.value.field == "roofs[1][2]"
+    with pytest.raises(InputError) as err:
+        parse_building({"roofs": [["a", "b"]], "ground": 1}, "")
+    assert err.value.field is None and "id: missing" in err.value.problem
+    assert "roofs[0]: a face needs at least 3 point ids" in err.value.problem

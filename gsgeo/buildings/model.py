@@ -40,7 +40,7 @@ from gsgeo.buildings.measures import (
 )
 from gsgeo.buildings.solid import Surface, check_plan, corners, shell_surfaces, shell_vertices
 from gsgeo.buildings.solidcheck import check_solid
-from gsgeo.buildings.spec import BuildingSpec, building_to_json
+from gsgeo.buildings.spec import MAX_GROUND_SIGMA_M, BuildingSpec, building_to_json
 from gsgeo.buildings.topology import Topology, build_topology, face_label
 from gsgeo.errors import GeometryError, InputError
 from gsgeo.jsontypes import JSONObject
@@ -212,9 +212,13 @@ def _resolve_ground(spec: BuildingSpec, points: Points, ground_height: float | N
             raise InputError("the ground height is not known: sample the DTM first "
                              "(gsgeo.buildings.ground.dtm_ground)", field="ground")
         ground_height = g.height
-    if not math.isfinite(ground_height):
-        raise InputError("the ground height is not a finite number", field="ground")
+    if not math.isfinite(ground_height) or abs(ground_height) > MAX_COORDINATE:
+        raise InputError("the ground height is not a finite number within "
+                         f"±{MAX_COORDINATE:g}", field="ground")
     sigma = ground_sigma if ground_sigma > 0 else (g.sigma or 0.0)
+    if not 0 <= sigma <= MAX_GROUND_SIGMA_M:
+        raise InputError(f"the ground's sigma must be between 0 and {MAX_GROUND_SIGMA_M:g} m, "
+                         f"got {sigma:g}", field="ground")
     return float(ground_height), float(sigma)
 
 

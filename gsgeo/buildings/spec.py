@@ -35,6 +35,8 @@ RESERVED_ATTRIBUTES = ("measuredHeight", "roofType", "volume", "footprintArea", 
                        "ridgeHeight", "groundHeight", "sigmaMeasuredHeight", "sigmaVolume",
                        "sigmaFootprintArea", "sigmaEavesHeight", "sigmaRidgeHeight",
                        "adjustmentSigma0")
+#: Largest 1-sigma (m) of a given ground height.
+MAX_GROUND_SIGMA_M = 1000.0
 KEYS = ("id", "roofs", "walls", "ground", "attributes", "regularise")
 GROUND_KEYS = ("height", "point", "dtm", "sigma")
 
@@ -171,8 +173,9 @@ def _ground(value: Any, fld: str, problems: _Problems) -> Ground:
     sigma = None
     if "sigma" in value:
         sigma = _number(value["sigma"], f"{fld}.sigma", problems, "metres")
-        if sigma is not None and sigma < 0:
-            problems.add(f"{fld}.sigma", f"must not be negative, got {sigma:g}")
+        if sigma is not None and not 0 <= sigma <= MAX_GROUND_SIGMA_M:
+            problems.add(f"{fld}.sigma", f"must be between 0 and {MAX_GROUND_SIGMA_M:g} m, "
+                                         f"got {sigma:g}")
             sigma = None
     key = given[0]
     if key == "height":
