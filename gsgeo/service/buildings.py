@@ -39,8 +39,10 @@ from gsgeo.store.records import BuildingRecord, ConflictError, NotFoundError, Pr
 
 #: Directory of DTM GeoTIFFs inside the data directory.
 DTM_DIR = "dtm"
-#: Most distinct points one building may use (its adjustment is dense in them).
-MAX_BUILDING_POINTS = 1000
+#: Most distinct points one building may use: its adjustment is dense in them, so its cost
+#: grows with their cube (about 2 s of CPU for 200 points on a 2-core machine, and the model
+#: is rebuilt on every read); an LoD2 building has a few dozen.
+MAX_BUILDING_POINTS = 200
 #: Fields of a building that PATCH may change.
 BUILDING_FIELDS = ("id", "roofs", "walls", "ground", "attributes", "regularise")
 
