@@ -288,7 +288,7 @@ def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
     # (Escape first drops the selection of the last point, whose rays would cross the picture)
     page.keyboard.press("Escape")
     page.wait_for_function("gsgeo.state.selected === null")
-    aim(page, centre, (0.0, 89.0, 40.0, [0.0, 0.0, 0.0]))
+    aim(page, centre, (180.0, 89.0, 40.0, [0.0, 0.0, 0.0]))  # north up
     if not settle(page):
         warnings.warn("the splats were not all drawn in time; the pixel check waits for a steady "
                       "picture instead", stacklevel=1)
