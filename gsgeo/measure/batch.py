@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -634,6 +634,9 @@ def _finish_json(points: Sequence[BatchPoint], s: _Solved, source: str, point_ec
     geo = None if geodetic is None else [a.tolist() for a in geodetic]
     ends = np.cumsum(s.counts).tolist()
     bounds = list(zip([0, *ends[:-1]], ends, strict=True))
+    none3 = [None] * 3
+    no_grid: tuple[Any, ...] = ((None,) * 5, None, None, None, none3, None, None, None, None,
+                                [none3] * 3, None, None, None, None, [])  # GridRow without a grid
 
     def per_point(rows: Sequence[np.ndarray]) -> list[list]:
         """Each point's rows as lists, from one tolist() of them all."""
@@ -671,35 +674,25 @@ def _finish_json(points: Sequence[BatchPoint], s: _Solved, source: str, point_ec
         px = (px_all[k] if px_all is not None else
               res_px.tolist() if res_px is not None else [None] * n)
         og = origins_grid[k]
-        rec: JSONObject = {
+        row: tuple[Any, ...] = no_grid if g is None else g
+        ((crs, height_type, vdatum, op, acc), e, nn, h, sig, major, minor, bearing, axes, c,
+         lon, lat, hw, meas, g_warnings) = row
+        if g is None and geo is not None:
+            lon, lat, hw = geo[0][k], geo[1][k], geo[2][k]
+        sm = sig if meas is None else meas
+        warnings = s.before[k] + s.warnings[k] + s.notes[k] + g_warnings
+        rec: JSONObject = {  # Measurement.record()'s keys, in their order
             "point_id": pid, "code": code, "description": description,
-            "easting": None, "northing": None, "height": None, "height_type": None,
-            "vertical_datum": None, "crs": None, "sigma_e": None, "sigma_n": None,
-            "sigma_h": None, "sigma_e_meas": None, "sigma_n_meas": None, "sigma_h_meas": None,
-            "cov_ee": None, "cov_en": None, "cov_eh": None, "cov_nn": None, "cov_nh": None,
-            "cov_hh": None, "ellipse_major_95": None, "ellipse_minor_95": None,
-            "ellipse_bearing_deg": None, "sigma0": sigma0[k], "n_rays": n - sum(excluded),
-            "max_angle_deg": max_angle[k], "rms_m": rms[k],
-            "max_residual_px": sol_max[k],
-            "lon": None, "lat": None, "h_wgs84": None, "operation": None,
-            "operation_accuracy_m": None, "measured_at": measured_at}
-        warnings = s.before[k] + s.warnings[k] + s.notes[k]
-        axes = None
-        if g is not None:
-            ((crs, height_type, vdatum, op, acc), e, nn, h, sig, major, minor, bearing, axes,
-             c, lon, lat, hw, meas, g_warnings) = g
-            sm = sig if meas is None else meas
-            rec.update(easting=e, northing=nn, height=h, height_type=height_type,
-                       vertical_datum=vdatum, crs=crs, sigma_e=sig[0], sigma_n=sig[1],
-                       sigma_h=sig[2], sigma_e_meas=sm[0], sigma_n_meas=sm[1],
-                       sigma_h_meas=sm[2], cov_ee=c[0][0], cov_en=c[0][1], cov_eh=c[0][2],
-                       cov_nn=c[1][1], cov_nh=c[1][2], cov_hh=c[2][2],
-                       ellipse_major_95=major, ellipse_minor_95=minor,
-                       ellipse_bearing_deg=bearing, lon=lon, lat=lat, h_wgs84=hw,
-                       operation=op, operation_accuracy_m=acc)
-            warnings = warnings + g_warnings
-        elif geo is not None:
-            rec.update(lon=geo[0][k], lat=geo[1][k], h_wgs84=geo[2][k])
+            "easting": e, "northing": nn, "height": h, "height_type": height_type,
+            "vertical_datum": vdatum, "crs": crs, "sigma_e": sig[0], "sigma_n": sig[1],
+            "sigma_h": sig[2], "sigma_e_meas": sm[0], "sigma_n_meas": sm[1],
+            "sigma_h_meas": sm[2], "cov_ee": c[0][0], "cov_en": c[0][1], "cov_eh": c[0][2],
+            "cov_nn": c[1][1], "cov_nh": c[1][2], "cov_hh": c[2][2],
+            "ellipse_major_95": major, "ellipse_minor_95": minor,
+            "ellipse_bearing_deg": bearing, "sigma0": sigma0[k], "n_rays": n - sum(excluded),
+            "max_angle_deg": max_angle[k], "rms_m": rms[k], "max_residual_px": sol_max[k],
+            "lon": lon, "lat": lat, "h_wgs84": hw, "operation": op,
+            "operation_accuracy_m": acc, "measured_at": measured_at}
         ifov = (ifov_all[k] if ifov_all is not None else
                 rays.ifov.tolist() if rays.ifov is not None else [None] * n)
         og_rows = (grid_all[k] if grid_all is not None else

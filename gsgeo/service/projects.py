@@ -72,6 +72,8 @@ from gsgeo.tiles.georefhistory import undo as undo_scene
 
 SETTINGS = ("crs", "vertical", "geoid", "source_crs", "sigma_px")
 KINDS = {"line": 2, "polygon": 3}  # kind -> minimum number of points
+#: What a point's frame record holds (gsgeo.service.georeferencing.frame_record).
+FRAME_KEYS = frozenset({"version", "root_transform"})
 MAX_FEATURE_POINTS = 10_000
 
 
@@ -268,11 +270,12 @@ class Projects(BuildingService):
         every point's frame (a project moved to another scene). Returns the number of points."""
         with without_cyclic_gc():
             pts = tx.list_points(p.id, results=False)  # all measured again below
+            pinned = None if pin is None else dict(pin)  # one record, shared (never mutated)
             for pt in pts:
                 if forget_frames:
                     pt.frame = None
-                elif pt.frame is None and pin is not None:
-                    pt.frame = dict(pin)
+                elif pt.frame is None:
+                    pt.frame = pinned
             tx.update_results(self._measure_many(pts, p, ctx))
             n = len(pts)
             # freed while the collector is still held: otherwise the objects the results are
@@ -292,12 +295,16 @@ class Projects(BuildingService):
         typed: list[tuple[int, Rays]] = []
         carries: dict[tuple[float, ...], FloatArray | None] = {}  # one per distinct frame
         point_carry: list[FloatArray | None] = []
+        shared: dict[tuple[object, ...], JSONObject] = {}  # equal frames as one object,
+        # which the store writes once
         for pt in pts:
             pt.solved_rev = p.settings_rev
             root = () if pt.frame is None else tuple(pt.frame.get("root_transform") or ())
             if root not in carries:
                 carries[root] = carry(pt.frame, ctx)
             point_carry.append(carries[root])
+            if pt.frame is not None and pt.frame.keys() == FRAME_KEYS:
+                pt.frame = shared.setdefault((pt.frame["version"], root), pt.frame)
         for k, rays in enumerate(stored_rays_many([q.rays for q in pts], point_carry)):
             if isinstance(rays, Rays):
                 typed.append((k, rays))
