@@ -649,13 +649,11 @@ def _finish_json(points: Sequence[BatchPoint], s: _Solved, source: str, point_ec
     pxs = [a for a in px_rows if a is not None]
     px_all = per_point(pxs) if len(pxs) == len(px_rows) else None
     # the largest pixel residual of each solution, NaN where any is NaN (as np.max gives it)
-    sol_max: list[float | None] = [None] * len(sol_rows)
     given = [a for a in sol_rows if a is not None]
+    sol_max: list[float | None]
     if sol_rows and len(given) == len(sol_rows):
-        flat_sol = np.concatenate(given)
         starts = np.concatenate([[0], np.cumsum([a.shape[0] for a in given])[:-1]])
-        top = np.maximum.reduceat(flat_sol, starts)  # NaN propagates
-        sol_max = top.tolist()
+        sol_max = np.maximum.reduceat(np.concatenate(given), starts).tolist()
     else:
         sol_max = [None if a is None else largest(a.tolist()) for a in sol_rows]
     grids = [a for a in origins_grid if a is not None]
