@@ -14,6 +14,7 @@ from gsgeo.store.records import (
     FeatureRecord,
     NotFoundError,
     PointRecord,
+    PreconditionFailed,
     Project,
 )
 from gsgeo.store.sqlite import DB_NAME, SQLiteStore, StoreError, open_store
@@ -26,6 +27,7 @@ __all__ = [
     "FeatureRecord",
     "NotFoundError",
     "PointRecord",
+    "PreconditionFailed",
     "Project",
     "SQLiteStore",
     "Store",

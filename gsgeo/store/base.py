@@ -4,6 +4,13 @@ All reads and writes happen inside ``store.transaction()``; a backend commits th
 block or nothing, so a crash, a kill or an exception in the middle never leaves half a
 change behind. Write transactions are serialised (SQLite: ``BEGIN IMMEDIATE``), so code
 running inside one may read, decide and write without races.
+
+Versions (optimistic concurrency): a point, line/polygon or building is stored with version 1
+and every update of it adds one. ``update_point`` / ``update_feature`` / ``update_building``
+write only when the stored version is still the record's ``version`` (the one read) and raise
+:class:`~gsgeo.store.records.PreconditionFailed` otherwise (naming the stored version); on
+success they set the record's ``version`` to the new one. ``update_results`` adds one to each
+point it writes, unchecked (a re-measure writes derived state of points it has just read).
 """
 
 from __future__ import annotations
@@ -102,10 +109,12 @@ class Transaction(ABC):
     def insert_point(self, point: PointRecord) -> None: ...
     @abstractmethod
     def update_point(self, point: PointRecord, old_id: str | None = None) -> None:
-        """Write ``point``; ``old_id`` is its previous id when it is being renamed."""
+        """Write ``point`` if its stored version is ``point.version`` (else PreconditionFailed);
+        ``old_id`` is its previous id when it is being renamed."""
     def update_results(self, points: Iterable[PointRecord]) -> None:
         """Write the measured state (result, error, solved_rev, frame) of many points at once,
-        e.g. after a re-measure; their other fields are as stored. Backends may do it in bulk;
+        e.g. after a re-measure; their other fields are as stored, their versions go up by one
+        each (unchecked). Backends may do it in bulk;
         ``points`` is consumed once, in order (a generator may make each result as it goes)."""
         for pt in points:
             self.update_point(pt)
@@ -139,7 +148,8 @@ class Transaction(ABC):
     @abstractmethod
     def insert_feature(self, feature: FeatureRecord) -> None: ...
     @abstractmethod
-    def update_feature(self, feature: FeatureRecord, old_id: str | None = None) -> None: ...
+    def update_feature(self, feature: FeatureRecord, old_id: str | None = None) -> None:
+        """Write ``feature`` if its stored version is ``feature.version`` (as update_point)."""
     @abstractmethod
     def delete_feature(self, pid: str, kind: str, fid: str) -> bool: ...
 
@@ -153,7 +163,8 @@ class Transaction(ABC):
     def insert_building(self, building: BuildingRecord) -> None: ...
     @abstractmethod
     def update_building(self, building: BuildingRecord, old_id: str | None = None) -> None:
-        """Write ``building``; ``old_id`` is its previous id when it is being renamed."""
+        """Write ``building`` if its stored version is ``building.version`` (as update_point);
+        ``old_id`` is its previous id when it is being renamed."""
     @abstractmethod
     def delete_building(self, pid: str, bid: str) -> bool: ...
 

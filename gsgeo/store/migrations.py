@@ -123,6 +123,15 @@ MIGRATIONS: list[str] = [
         PRIMARY KEY (project_id, id)
     );
     """,
+    # 6: optimistic concurrency: each point, line/polygon and building has a version, 1 when
+    # inserted and +1 on every update of it (re-measures included); an update names the
+    # version it read and changes nothing when the stored one differs (the API's ETag and
+    # If-Match). Existing rows start at 1.
+    """
+    ALTER TABLE points ADD COLUMN version INTEGER NOT NULL DEFAULT 1 CHECK (version >= 1);
+    ALTER TABLE features ADD COLUMN version INTEGER NOT NULL DEFAULT 1 CHECK (version >= 1);
+    ALTER TABLE buildings ADD COLUMN version INTEGER NOT NULL DEFAULT 1 CHECK (version >= 1);
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -23,6 +23,17 @@ class ConflictError(InputError):
     """The change clashes with what is stored, e.g. a duplicate id (HTTP 409)."""
 
 
+class PreconditionFailed(ConflictError):
+    """A change made on a stale copy of a point, line, polygon or building: the stored
+    ``version`` is not the one the client names (If-Match), or the item changed between
+    reading and writing it (HTTP 412). ``current``: the stored version (None: not known)."""
+
+    def __init__(self, problem: str = "", *, current: int | None = None,
+                 field: str | None = None, source: str | None = None) -> None:
+        super().__init__(problem, field=field, source=source)
+        self.current = current
+
+
 @dataclass
 class Project:
     """A measuring project: its scene and the settings its points are solved with.
@@ -74,6 +85,9 @@ class PointRecord:
     # The scene georeference the rays were taken under: {"version": int, "root_transform":
     # 16 numbers column-major}; None: the scene's frame before its first georeference change.
     frame: JSONObject | None = None
+    # 1 when inserted, +1 on every update of the stored item (optimistic concurrency: the
+    # API's ETag); the store writes it, a caller never sets it
+    version: int = 1
 
     def __post_init__(self) -> None:
         if self.record is None and self.result is not None:
@@ -93,6 +107,9 @@ class FeatureRecord:
     seq: int = 0
     created_at: str = ""
     updated_at: str = ""
+    # 1 when inserted, +1 on every update of the stored item (optimistic concurrency: the
+    # API's ETag); the store writes it, a caller never sets it
+    version: int = 1
 
 
 @dataclass
@@ -106,6 +123,9 @@ class BuildingRecord:
     seq: int = 0
     created_at: str = ""
     updated_at: str = ""
+    # 1 when inserted, +1 on every update of the stored item (optimistic concurrency: the
+    # API's ETag); the store writes it, a caller never sets it
+    version: int = 1
 
 
 @dataclass

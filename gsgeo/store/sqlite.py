@@ -29,6 +29,7 @@ from gsgeo.store.records import (
     ConflictError,
     FeatureRecord,
     PointRecord,
+    PreconditionFailed,
     Project,
 )
 
@@ -119,6 +120,15 @@ class SQLiteTransaction(Transaction):
     def _all(self, sql: str, args: tuple = ()) -> list[sqlite3.Row]:
         return self.con.execute(sql, args).fetchall()
 
+    def _stale(self, table: str, where: str, args: tuple, what: str, read: int) -> None:
+        """Raise PreconditionFailed for an update that matched no row because the stored
+        version is no longer ``read`` (the one the caller read)."""
+        row = self._one(f"SELECT version FROM {table} WHERE {where}", args)
+        current = None if row is None else int(row[0])
+        now = "is deleted" if current is None else f"is at version {current}"
+        raise PreconditionFailed(f"{what} changed meanwhile: it {now}, not version {read} "
+                                 "as read", current=current)
+
     def _insert(self, sql: str, args: tuple, what: str) -> None:
         try:
             self.con.execute(sql, args)
@@ -176,12 +186,12 @@ class SQLiteTransaction(Transaction):
                            result=_loads(row["result"]),
                            error=row["error"], solved_rev=row["solved_rev"],
                            created_at=row["created_at"], updated_at=row["updated_at"],
-                           frame=_loads(row["frame"]))
+                           frame=_loads(row["frame"]), version=row["version"])
 
     def list_points(self, pid: str, results: bool = True) -> list[PointRecord]:
         cols = "*" if results else ("project_id, id, seq, code, description, rays, excluded, "
                                     "NULL AS result, error, solved_rev, created_at, updated_at, "
-                                    "frame")
+                                    "frame, version")
         rows = self._all(f"SELECT {cols} FROM points WHERE project_id = ? ORDER BY seq", (pid,))
         return [self._point(r) for r in rows]
 
@@ -209,6 +219,7 @@ class SQLiteTransaction(Transaction):
 
     def insert_point(self, p: PointRecord) -> None:
         p.created_at = p.updated_at = now_iso()
+        p.version = 1
         p.seq = self._next_seq("SELECT COALESCE(MAX(seq), 0) + 1 FROM points WHERE project_id = ?",
                                (p.project_id,))
         self._insert(
@@ -224,20 +235,25 @@ class SQLiteTransaction(Transaction):
 
     def update_point(self, p: PointRecord, old_id: str | None = None) -> None:
         p.updated_at = now_iso()
+        key = (p.project_id, old_id or p.id)
         try:
-            self.con.execute(
+            cur = self.con.execute(
                 "UPDATE points SET id=?, code=?, description=?, rays=?, excluded=?, result=?,"
-                " error=?, solved_rev=?, updated_at=?, frame=? WHERE project_id=? AND id=?",
+                " error=?, solved_rev=?, updated_at=?, frame=?, version=version+1"
+                " WHERE project_id=? AND id=? AND version=?",
                 (p.id, p.code, p.description, _dumps(p.rays), _dumps(p.excluded),
                  None if p.result is None else _dumps(p.result),
                  p.error, p.solved_rev,
                  p.updated_at, None if p.frame is None else _dumps(p.frame),
-                 p.project_id, old_id or p.id),
+                 *key, p.version),
             )
         except sqlite3.IntegrityError as exc:
             if "UNIQUE" in str(exc) or "PRIMARY KEY" in str(exc):
                 raise ConflictError(f"point '{p.id}' already exists") from None
             raise
+        if cur.rowcount == 0:
+            self._stale("points", "project_id=? AND id=?", key, f"point '{key[1]}'", p.version)
+        p.version += 1
 
     def update_results(self, points: Iterable[PointRecord]) -> None:
         now = now_iso()
@@ -252,13 +268,14 @@ class SQLiteTransaction(Transaction):
         def rows() -> Iterator[tuple[object, ...]]:  # one at a time, as executemany asks
             for p in points:
                 p.updated_at = now
+                p.version += 1  # a new result is a new version of the point
                 yield (None if p.result is None else _dumps(p.result), p.error, p.solved_rev,
                        None if p.frame is None else frame_text(p.frame), now, p.project_id,
                        p.id)
 
         self.con.executemany(
-            "UPDATE points SET result=?, error=?, solved_rev=?, frame=?, updated_at=?"
-            " WHERE project_id=? AND id=?", rows())
+            "UPDATE points SET result=?, error=?, solved_rev=?, frame=?, updated_at=?,"
+            " version=version+1 WHERE project_id=? AND id=?", rows())
 
     def delete_point(self, pid: str, point_id: str) -> bool:
         cur = self.con.execute("DELETE FROM points WHERE project_id = ? AND id = ?", (pid, point_id))
@@ -270,7 +287,8 @@ class SQLiteTransaction(Transaction):
         return FeatureRecord(project_id=row["project_id"], kind=row["kind"], id=row["id"],
                              seq=row["seq"], point_ids=json.loads(row["point_ids"]),
                              code=row["code"], description=row["description"],
-                             created_at=row["created_at"], updated_at=row["updated_at"])
+                             created_at=row["created_at"], updated_at=row["updated_at"],
+                             version=row["version"])
 
     def list_features(self, pid: str, kind: str) -> list[FeatureRecord]:
         rows = self._all("SELECT * FROM features WHERE project_id = ? AND kind = ? ORDER BY seq",
@@ -284,6 +302,7 @@ class SQLiteTransaction(Transaction):
 
     def insert_feature(self, f: FeatureRecord) -> None:
         f.created_at = f.updated_at = now_iso()
+        f.version = 1
         f.seq = self._next_seq("SELECT COALESCE(MAX(seq), 0) + 1 FROM features WHERE project_id = ?"
                                " AND kind = ?", (f.project_id, f.kind))
         self._insert(
@@ -296,17 +315,22 @@ class SQLiteTransaction(Transaction):
 
     def update_feature(self, f: FeatureRecord, old_id: str | None = None) -> None:
         f.updated_at = now_iso()
+        key = (f.project_id, f.kind, old_id or f.id)
         try:
-            self.con.execute(
-                "UPDATE features SET id=?, point_ids=?, code=?, description=?, updated_at=?"
-                " WHERE project_id=? AND kind=? AND id=?",
+            cur = self.con.execute(
+                "UPDATE features SET id=?, point_ids=?, code=?, description=?, updated_at=?,"
+                " version=version+1 WHERE project_id=? AND kind=? AND id=? AND version=?",
                 (f.id, _dumps(f.point_ids), f.code, f.description, f.updated_at,
-                 f.project_id, f.kind, old_id or f.id),
+                 *key, f.version),
             )
         except sqlite3.IntegrityError as exc:
             if "UNIQUE" in str(exc) or "PRIMARY KEY" in str(exc):
                 raise ConflictError(f"{f.kind} '{f.id}' already exists") from None
             raise
+        if cur.rowcount == 0:
+            self._stale("features", "project_id=? AND kind=? AND id=?", key,
+                        f"{f.kind} '{key[2]}'", f.version)
+        f.version += 1
 
     def delete_feature(self, pid: str, kind: str, fid: str) -> bool:
         cur = self.con.execute("DELETE FROM features WHERE project_id = ? AND kind = ? AND id = ?",
@@ -318,7 +342,7 @@ class SQLiteTransaction(Transaction):
     def _building(row: sqlite3.Row) -> BuildingRecord:
         return BuildingRecord(project_id=row["project_id"], id=row["id"], seq=row["seq"],
                               spec=orjson.loads(row["spec"]), created_at=row["created_at"],
-                              updated_at=row["updated_at"])
+                              updated_at=row["updated_at"], version=row["version"])
 
     def list_buildings(self, pid: str) -> list[BuildingRecord]:
         rows = self._all("SELECT * FROM buildings WHERE project_id = ? ORDER BY seq", (pid,))
@@ -330,6 +354,7 @@ class SQLiteTransaction(Transaction):
 
     def insert_building(self, b: BuildingRecord) -> None:
         b.created_at = b.updated_at = now_iso()
+        b.version = 1
         b.seq = self._next_seq("SELECT COALESCE(MAX(seq), 0) + 1 FROM buildings"
                                " WHERE project_id = ?", (b.project_id,))
         self._insert(
@@ -341,14 +366,20 @@ class SQLiteTransaction(Transaction):
 
     def update_building(self, b: BuildingRecord, old_id: str | None = None) -> None:
         b.updated_at = now_iso()
+        key = (b.project_id, old_id or b.id)
         try:
-            self.con.execute(
-                "UPDATE buildings SET id=?, spec=?, updated_at=? WHERE project_id=? AND id=?",
-                (b.id, _dumps(b.spec), b.updated_at, b.project_id, old_id or b.id))
+            cur = self.con.execute(
+                "UPDATE buildings SET id=?, spec=?, updated_at=?, version=version+1"
+                " WHERE project_id=? AND id=? AND version=?",
+                (b.id, _dumps(b.spec), b.updated_at, *key, b.version))
         except sqlite3.IntegrityError as exc:
             if "UNIQUE" in str(exc) or "PRIMARY KEY" in str(exc):
                 raise ConflictError(f"building '{b.id}' already exists") from None
             raise
+        if cur.rowcount == 0:
+            self._stale("buildings", "project_id=? AND id=?", key, f"building '{key[1]}'",
+                        b.version)
+        b.version += 1
 
     def delete_building(self, pid: str, bid: str) -> bool:
         cur = self.con.execute("DELETE FROM buildings WHERE project_id = ? AND id = ?",
