@@ -1,4 +1,7 @@
-"""gsgeo.store on a real SQLite file: schema, transactions, solving, recomputation, crashes."""
+"""gsgeo.store on a real SQLite file and on a real PostgreSQL + PostGIS database (the
+``backend`` parameter; the cluster is tests/pgcluster.py's): schema, transactions, solving,
+recomputation, crashes. What only one backend has (SQLite's file, PostgreSQL's views and
+servers) is tested here for SQLite and in tests/test_store_postgres.py for PostgreSQL."""
 
 from __future__ import annotations
 
@@ -13,6 +16,7 @@ import time
 import numpy as np
 import pyproj
 import pytest
+from pgcluster import pg_cluster  # noqa: F401  (the session's PostgreSQL cluster)
 from servertools import LONDON, REPO, ecef_of, london_rays, rays_at
 
 from gsgeo.errors import CRSError, GeometryError, InputError
@@ -34,9 +38,27 @@ UTM30 = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:32630", always_xy=True)
 UTM31 = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:32631", always_xy=True)
 
 
+try:
+    import psycopg
+
+    INTEGRITY_ERRORS: tuple[type[Exception], ...] = (sqlite3.IntegrityError, psycopg.IntegrityError)
+except ImportError:  # the PostgreSQL runs skip, naming what is missing (tests/pgcluster.py)
+    INTEGRITY_ERRORS = (sqlite3.IntegrityError,)
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store_url(request) -> str | None:
+    """None: the SQLite file of the test's data directory; else the URL of a fresh database
+    (with PostGIS) on the session's PostgreSQL cluster."""
+    if request.param == "sqlite":
+        return None
+    cluster = request.getfixturevalue("pg_cluster")
+    return cluster.url(cluster.new_database())
+
+
 @pytest.fixture
-def store(tmp_path):
-    s = open_store(tmp_path)
+def store(tmp_path, store_url):
+    s = open_store(tmp_path, store_url)
     yield s
     s.close()
 
@@ -46,15 +68,19 @@ def svc(store, tmp_path):
     return Projects(store, tmp_path)
 
 
-def test_new_store_is_wal_with_current_schema(tmp_path, store):
-    assert (tmp_path / DB_NAME).is_file()
-    assert store.schema_version == SCHEMA_VERSION
-    con = sqlite3.connect(tmp_path / DB_NAME)
-    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-    tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-    assert {"projects", "points", "features", "check_points"} <= tables
-    con.close()
-    assert store.check_integrity() == []
+def test_new_store_is_wal_with_current_schema(tmp_path):
+    store = open_store(tmp_path)
+    try:
+        assert (tmp_path / DB_NAME).is_file()
+        assert store.schema_version == SCHEMA_VERSION
+        con = sqlite3.connect(tmp_path / DB_NAME)
+        assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        assert {"projects", "points", "features", "check_points"} <= tables
+        con.close()
+        assert store.check_integrity() == []
+    finally:
+        store.close()
 
 
 def test_newer_schema_is_refused(tmp_path):
@@ -74,9 +100,9 @@ def test_not_a_database_is_a_clear_error(tmp_path):
         open_store(tmp_path)
 
 
-def test_records_round_trip_across_restart(tmp_path):
+def test_records_round_trip_across_restart(tmp_path, store_url):
     rays = london_rays(3)
-    s = open_store(tmp_path)
+    s = open_store(tmp_path, store_url)
     with s.transaction() as tx:
         tx.insert_project(Project(id="p1", name="One", crs="EPSG:32630", sigma_px=0.7))
         tx.insert_point(PointRecord(project_id="p1", id="A", rays=rays, code="c", excluded=[2],
@@ -86,7 +112,7 @@ def test_records_round_trip_across_restart(tmp_path):
         tx.upsert_check_points([CheckPointRecord(project_id="p1", id="A", x=1, y=2, z=None,
                                                  crs="EPSG:27700")])
     s.close()
-    s = open_store(tmp_path)
+    s = open_store(tmp_path, store_url)
     with s.transaction(write=False) as tx:
         p = tx.get_project("p1")
         pts = tx.list_points("p1")
@@ -115,9 +141,9 @@ def test_schema_refuses_half_points(store):
     """The table itself rejects a point with rays but neither a result nor an error."""
     with store.transaction() as tx:
         tx.insert_project(Project(id="p1", name="One"))
-    with pytest.raises(sqlite3.IntegrityError), store.transaction() as tx:
+    with pytest.raises(INTEGRITY_ERRORS), store.transaction() as tx:
         tx.insert_point(PointRecord(project_id="p1", id="A", rays=london_rays(2)))
-    with pytest.raises(sqlite3.IntegrityError), store.transaction() as tx:
+    with pytest.raises(INTEGRITY_ERRORS), store.transaction() as tx:
         tx.insert_point(PointRecord(project_id="p1", id="A", rays=london_rays(2)[:1], error="x"))
 
 
@@ -244,7 +270,7 @@ WRITER = textwrap.dedent("""
     sys.path.insert(0, {tests!r})
     from servertools import ecef_of, rays_at, LONDON
     from gsgeo.service import Projects, open_store
-    svc = Projects(open_store({data!r}))
+    svc = Projects(open_store({data!r}, {url!r}))
     pid = svc.create_project(name="crash", id="crash", crs="EPSG:32630").id
     crs = ["EPSG:32630", "EPSG:32631"]
     i = 0
@@ -258,10 +284,11 @@ WRITER = textwrap.dedent("""
 """)
 
 
-def test_kill_9_in_the_middle_of_writes_leaves_a_consistent_store(tmp_path):
+def test_kill_9_in_the_middle_of_writes_leaves_a_consistent_store(tmp_path, store_url):
     data = tmp_path / "data"
     proc = subprocess.Popen(
-        [sys.executable, "-c", WRITER.format(tests=str(REPO / "tests"), data=str(data))],
+        [sys.executable, "-c", WRITER.format(tests=str(REPO / "tests"), data=str(data),
+                                             url=store_url)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
     acknowledged = -1
     t0 = time.monotonic()
@@ -273,7 +300,7 @@ def test_kill_9_in_the_middle_of_writes_leaves_a_consistent_store(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert acknowledged >= 40, proc.stderr.read()
-    s = open_store(data)
+    s = open_store(data, store_url)
     try:
         assert s.check_integrity() == []
         with s.transaction(write=False) as tx:

@@ -1,0 +1,96 @@
+"""PostgreSQL schema, as numbered migrations (the version is the one row of
+``gsgeo_schema``).
+
+Append a migration to change the schema; never edit one that has shipped. Each migration runs
+in one transaction together with the bump of the version, under an advisory lock, so several
+servers starting at once migrate once. JSON columns are ``json`` (the text as written, key
+order kept, so records read back exactly as from SQLite); queries cast to ``jsonb`` where
+they look inside. Times are ISO 8601 text, as in SQLite.
+"""
+
+from __future__ import annotations
+
+MIGRATIONS: list[str] = [
+    # 1: the schema of SQLite's migrations 1-5 in one step, plus the `version` of every point,
+    # line, polygon and building (optimistic concurrency) and a commit counter for revision()
+    """
+    CREATE TABLE projects (
+        id TEXT PRIMARY KEY,
+        name TEXT NOT NULL,
+        description TEXT NOT NULL DEFAULT '',
+        scene TEXT,
+        crs TEXT,
+        vertical TEXT,
+        geoid TEXT,
+        source_crs TEXT NOT NULL DEFAULT 'EPSG:4978',
+        sigma_px DOUBLE PRECISION NOT NULL DEFAULT 1.0 CHECK (sigma_px > 0),
+        settings_rev INTEGER NOT NULL DEFAULT 0,
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        scene_version INTEGER
+    );
+    CREATE TABLE points (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        id TEXT NOT NULL,
+        seq INTEGER NOT NULL,
+        code TEXT NOT NULL DEFAULT '',
+        description TEXT NOT NULL DEFAULT '',
+        rays JSON NOT NULL CHECK (json_typeof(rays) = 'array' AND json_array_length(rays) >= 2),
+        excluded JSON NOT NULL DEFAULT '[]',
+        result JSON,
+        error TEXT,
+        solved_rev INTEGER NOT NULL DEFAULT -1,
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        frame JSON,
+        version INTEGER NOT NULL DEFAULT 1,
+        PRIMARY KEY (project_id, id),
+        CHECK (result IS NOT NULL OR error IS NOT NULL)
+    );
+    CREATE INDEX points_seq ON points(project_id, seq);
+    CREATE TABLE features (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        kind TEXT NOT NULL CHECK (kind IN ('line', 'polygon')),
+        id TEXT NOT NULL,
+        seq INTEGER NOT NULL,
+        point_ids JSON NOT NULL,
+        code TEXT NOT NULL DEFAULT '',
+        description TEXT NOT NULL DEFAULT '',
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        version INTEGER NOT NULL DEFAULT 1,
+        PRIMARY KEY (project_id, kind, id)
+    );
+    CREATE TABLE buildings (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        id TEXT NOT NULL,
+        seq INTEGER NOT NULL,
+        spec JSON NOT NULL,
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        version INTEGER NOT NULL DEFAULT 1,
+        PRIMARY KEY (project_id, id)
+    );
+    CREATE TABLE check_points (
+        project_id TEXT NOT NULL REFERENCES projects(id) ON DELETE CASCADE,
+        id TEXT NOT NULL,
+        x DOUBLE PRECISION NOT NULL,
+        y DOUBLE PRECISION NOT NULL,
+        z DOUBLE PRECISION,
+        crs TEXT NOT NULL,
+        role TEXT NOT NULL DEFAULT 'check' CHECK (role IN ('check', 'control')),
+        source TEXT NOT NULL DEFAULT '',
+        created_at TEXT NOT NULL,
+        sigma_h DOUBLE PRECISION CHECK (sigma_h IS NULL OR sigma_h > 0),
+        sigma_v DOUBLE PRECISION CHECK (sigma_v IS NULL OR sigma_v > 0),
+        PRIMARY KEY (project_id, id)
+    );
+    CREATE TABLE gsgeo_revision (
+        one BOOLEAN PRIMARY KEY DEFAULT TRUE CHECK (one),
+        n BIGINT NOT NULL
+    );
+    INSERT INTO gsgeo_revision (n) VALUES (0);
+    """,
+]
+
+SCHEMA_VERSION = len(MIGRATIONS)
