@@ -36,6 +36,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "they keep their PROJ objects for the server's lifetime)")
     p.add_argument("--log-level", default="warning",
                    choices=["critical", "error", "warning", "info", "debug"])
+    p.add_argument("--store", default=None, metavar="URL",
+                   help="keep projects in a PostgreSQL + PostGIS database, "
+                        "postgresql://USER[:PASSWORD]@HOST:PORT/DATABASE, which several servers "
+                        "may share (default: $GSGEO_STORE, else DATA/gsgeo.sqlite)")
     p.set_defaults(run=run)
 
 
@@ -79,7 +83,13 @@ def run(args: argparse.Namespace) -> int:
     solver_threads = getattr(args, "solver_threads", 1)
     if not 1 <= solver_threads <= 64:
         raise InputError(f"--solver-threads must be between 1 and 64, got {solver_threads}")
+    from gsgeo.store import STORE_ENV
+
+    # callers such as `gsgeo demo` may leave it out; a bad URL or an unreachable server is a
+    # StoreError (exit 2) raised by create_app before anything is served
+    store_url = getattr(args, "store", None) or os.environ.get(STORE_ENV, "").strip() or None
     config = ServerConfig(data_dir=data, host=args.host, port=args.port, token=token,
+                          store_url=store_url,
                           web_dir=Path(args.web) if args.web else None,
                           solver_threads=solver_threads)
     app = create_app(config)  # opens (and migrates) the store before accepting requests

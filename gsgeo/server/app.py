@@ -53,6 +53,7 @@ class ServerConfig:
     max_body: int = 4 * MiB
     max_upload: int = 64 * MiB
     solver_threads: int = 1  # long-lived threads for POST /api/intersect (gsgeo.server.intersect_pool)
+    store_url: str | None = None  # postgresql://... (gsgeo.store.open_store); None: DATA/gsgeo.sqlite
     allowed_hosts: set[str] | None = field(default=None)  # None: derived from host
 
     def __post_init__(self) -> None:
@@ -162,7 +163,7 @@ The API is at <a href="/docs">/docs</a>; scenes are listed at
 
 def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     """The application; ``store`` defaults to the SQLite store of ``config.data_dir``."""
-    projects = open_projects(config.data_dir, store)
+    projects = open_projects(config.data_dir, store, config.store_url)  # store_url: None: SQLite
     store = projects.store
     intersect_pool = IntersectPool(config.solver_threads)
 
@@ -258,7 +259,7 @@ def config_to_env(config: ServerConfig) -> str:
                        "port": config.port, "token": config.token,
                        "web_dir": str(config.web_dir), "cesium_dir": str(config.cesium_dir),
                        "max_body": config.max_body, "max_upload": config.max_upload,
-                       "solver_threads": config.solver_threads,
+                       "solver_threads": config.solver_threads, "store_url": config.store_url,
                        "allowed_hosts": sorted(config.allowed_hosts)
                        if config.allowed_hosts is not None else None})
 

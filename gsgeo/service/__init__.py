@@ -32,9 +32,11 @@ from gsgeo.store import (
 )
 
 
-def open_projects(data_dir: str | Path, store: Store | None = None) -> Projects:
-    """The project service over ``store`` or the data directory's SQLite store."""
-    return Projects(store if store is not None else open_store(data_dir), data_dir)
+def open_projects(data_dir: str | Path, store: Store | None = None,
+                  url: str | None = None) -> Projects:
+    """The project service over ``store``, else the store ``url`` names (a PostgreSQL
+    database: gsgeo.store.open_store), else the data directory's SQLite store."""
+    return Projects(store if store is not None else open_store(data_dir, url), data_dir)
 
 
 __all__ = [
