@@ -2,7 +2,8 @@
 # Install gsgeo into a virtual environment (.venv, reused when present) on a Debian 12 machine
 # with python3 (>= 3.11) and, where missing, installs python3-venv and Node.js's npm through apt.
 #   bash scripts/install.sh          the package, its run-time dependencies and the web client
-#   bash scripts/install.sh --test   the same plus the test tools and Debian's chromium, proj-data and QGIS
+#   bash scripts/install.sh --test   the same plus the test tools and Debian's chromium, proj-data,
+#                                    QGIS, PostgreSQL 15 and PostGIS
 # Afterwards: `.venv/bin/gsgeo ...`, or `. .venv/bin/activate` once and then `gsgeo ...`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -54,6 +55,9 @@ if [ "$test_deps" = 1 ]; then
     command -v chromium >/dev/null 2>&1 || missing+=(chromium)
     # egm96_15.gtx, the one geoid Debian ships, for the vertical-datum tests.
     [ -f /usr/share/proj/egm96_15.gtx ] || missing+=(proj-data)
+    # PostgreSQL 15 and PostGIS for the store tests' throw-away cluster (tests/pgcluster.py).
+    [ -x /usr/lib/postgresql/15/bin/initdb ] || missing+=(postgresql-15)
+    [ -f /usr/share/postgresql/15/extension/postgis.control ] || missing+=(postgresql-15-postgis-3)
     if [ "${#missing[@]}" -gt 0 ]; then apt_install "${missing[@]}"; fi
     # Debian's QGIS Python and its providers (OAPIF) for the QGIS plugin's headless test;
     # where apt has no QGIS, that test skips and says why.
