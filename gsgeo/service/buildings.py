@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -35,7 +35,13 @@ from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.service.measuring import json_ready, solve_settings
 from gsgeo.service.validate import item_id
 from gsgeo.store.base import Store, Transaction
-from gsgeo.store.records import BuildingRecord, ConflictError, NotFoundError, Project
+from gsgeo.store.records import (
+    BuildingRecord,
+    ConflictError,
+    NotFoundError,
+    Project,
+    require_version,
+)
 
 #: Directory of DTM GeoTIFFs inside the data directory.
 DTM_DIR = "dtm"
@@ -164,7 +170,8 @@ class BuildingResult:
 def building_json(r: BuildingResult, project: Project, data_dir: Path | None) -> JSONObject:
     """The API's answer: BuildingModel.to_dict() plus ``vertices_ecef`` (ECEF metres of the
     project's source CRS, in the order of ``vertices``), ``error`` (None when built) and the
-    record's times. A building that cannot be built now has its ``spec`` and ``error``."""
+    record's times and version. A building that cannot be built now has its ``spec`` and
+    ``error``."""
     out: JSONObject
     if r.model is None:
         out = {"id": r.record.id, "spec": r.record.spec, "error": r.error}
@@ -178,6 +185,7 @@ def building_json(r: BuildingResult, project: Project, data_dir: Path | None) ->
             out["warnings"] = [*out.get("warnings", []), f"no ECEF vertices: {exc}"]
         out["error"] = None
     out["created_at"], out["updated_at"] = r.record.created_at, r.record.updated_at
+    out["version"] = r.record.version
     return json_ready(out)
 
 
@@ -332,9 +340,11 @@ class BuildingService:
         tx.insert_building(b)
         return r
 
-    def update_building(self, pid: str, bid: str, changes: JSONObject) -> JSONObject:
+    def update_building(self, pid: str, bid: str, changes: JSONObject,
+                        if_match: Collection[int] | None = None) -> JSONObject:
         """Change any of id, roofs, walls, ground, attributes, regularise (the rest as stored);
-        the changed building must build, else nothing is written."""
+        the changed building must build, else nothing is written. Refused when its version
+        is not in ``if_match`` (None: any)."""
         unknown = set(changes) - set(BUILDING_FIELDS)
         if unknown:
             raise InputError("not a building field that can be changed",
@@ -342,6 +352,7 @@ class BuildingService:
         with self.store.transaction() as tx:
             p = self._building_project(tx, pid)
             b = self._stored_building(tx, pid, bid)
+            require_version(f"building '{bid}'", b.version, if_match)
             old = b.id
             b.spec = self._checked_spec(tx, pid, dict(b.spec) | dict(changes))
             b.id = b.spec["id"]
@@ -352,8 +363,10 @@ class BuildingService:
             tx.update_building(b, old_id=old)
         return building_json(r, p, self.data_dir)
 
-    def delete_building(self, pid: str, bid: str) -> None:
+    def delete_building(self, pid: str, bid: str,
+                        if_match: Collection[int] | None = None) -> None:
         with self.store.transaction() as tx:
             self._building_project(tx, pid)
-            self._stored_building(tx, pid, bid)
+            b = self._stored_building(tx, pid, bid)
+            require_version(f"building '{bid}'", b.version, if_match)
             tx.delete_building(pid, bid)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 import secrets
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +66,7 @@ from gsgeo.store.records import (
     NotFoundError,
     PointRecord,
     Project,
+    require_version,
 )
 from gsgeo.tiles.georefhistory import apply_similarity
 from gsgeo.tiles.georefhistory import undo as undo_scene
@@ -415,8 +416,12 @@ class Projects(BuildingService):
         nums = [int(m.group(1)) for s in existing if (m := re.fullmatch(r"P(\d{1,9})", s))]
         return f"P{max(nums, default=0) + 1}"
 
-    def update_point(self, pid: str, point_id: str, changes: JSONObject) -> PointRecord:
+    def update_point(self, pid: str, point_id: str, changes: JSONObject,
+                     if_match: Collection[int] | None = None) -> PointRecord:
         """Rename (id), recode (code, description), exclude or restore rays, or replace rays.
+
+        ``if_match``: the versions the change is meant for (None: any); another stored
+        version refuses it (PreconditionFailed), checked in the write transaction.
 
         changes keys: id, code, description, excluded (full list of 0-based indices),
         exclude_ray, restore_ray (one index), rays (replaces all rays; clears exclusions; with
@@ -435,6 +440,7 @@ class Projects(BuildingService):
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
             pt = self._point(tx, pid, point_id)
+            require_version(f"point '{point_id}'", pt.version, if_match)
             remeasure = False
             typed = None
             if changes.get("rays") is not None:
@@ -485,10 +491,13 @@ class Projects(BuildingService):
                 rename_point(tx, pid, old_id, pt.id)
             return pt
 
-    def delete_point(self, pid: str, point_id: str) -> None:
-        """Delete a point; refused while a line, polygon or building uses it."""
+    def delete_point(self, pid: str, point_id: str,
+                     if_match: Collection[int] | None = None) -> None:
+        """Delete a point; refused while a line, polygon or building uses it, or when its
+        version is not in ``if_match`` (None: any)."""
         with self.store.transaction() as tx:
-            self._point(tx, pid, point_id)
+            pt = self._point(tx, pid, point_id)
+            require_version(f"point '{point_id}'", pt.version, if_match)
             users = [f"{f.kind} '{f.id}'" for kind in KINDS for f in tx.list_features(pid, kind)
                      if point_id in f.point_ids]
             users += [f"building '{b}'" for b in buildings_using(tx, pid, point_id)]
@@ -619,12 +628,16 @@ class Projects(BuildingService):
             tx.insert_feature(f)
             return f
 
-    def update_feature(self, pid: str, kind: str, fid: str, changes: JSONObject) -> FeatureRecord:
+    def update_feature(self, pid: str, kind: str, fid: str, changes: JSONObject,
+                       if_match: Collection[int] | None = None) -> FeatureRecord:
+        """Change a line's or polygon's id, points, code or description; refused when its
+        version is not in ``if_match`` (None: any)."""
         unknown = set(changes) - {"id", "points", "code", "description"}
         if unknown:
             raise InputError(f"not a {kind} field that can be changed", field=sorted(unknown)[0])
         with self.store.transaction() as tx:
             f = self._feature(tx, pid, kind, fid)
+            require_version(f"{kind} '{fid}'", f.version, if_match)
             if changes.get("points") is not None:
                 f.point_ids = self._feature_points(tx, pid, kind, changes["points"])
             if changes.get("code") is not None:
@@ -640,9 +653,11 @@ class Projects(BuildingService):
             tx.update_feature(f, old_id=old)
             return f
 
-    def delete_feature(self, pid: str, kind: str, fid: str) -> None:
+    def delete_feature(self, pid: str, kind: str, fid: str,
+                       if_match: Collection[int] | None = None) -> None:
         with self.store.transaction() as tx:
-            self._feature(tx, pid, kind, fid)
+            f = self._feature(tx, pid, kind, fid)
+            require_version(f"{kind} '{fid}'", f.version, if_match)
             tx.delete_feature(pid, kind, fid)
 
     # georeference ---------------------------------------------------------------------

@@ -8,6 +8,7 @@ the rays whenever the project's CRS, vertical datum, source CRS or sigma_px chan
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 from gsgeo.errors import GsgeoError, InputError
@@ -32,6 +33,21 @@ class PreconditionFailed(ConflictError):
                  field: str | None = None, source: str | None = None) -> None:
         super().__init__(problem, field=field, source=source)
         self.current = current
+
+
+def require_version(what: str, current: int, accepted: Collection[int] | None) -> None:
+    """Refuse a change of ``what`` (e.g. "point 'P1'") stored at version ``current`` unless
+    ``accepted`` (the versions the client names; None: no condition) holds it."""
+    if accepted is None or current in accepted:
+        return
+    if not accepted:  # e.g. only tags that are not versions of ours
+        named = "the version given"
+    elif len(accepted) == 1:
+        named = f"version {next(iter(accepted))}"
+    else:
+        named = "any of versions " + ", ".join(map(str, sorted(accepted)))
+    raise PreconditionFailed(f"{what} was changed by someone else: it is at version {current}, "
+                             f"not {named}; reload it and try again", current=current)
 
 
 @dataclass
