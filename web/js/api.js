@@ -40,9 +40,30 @@ function headers(extra = {}) {
 async function errorOf(response) {
   let data = null;
   try { data = await response.json(); } catch { /* not JSON */ }
-  const msg = (data && (data.message || (typeof data.detail === "string" && data.detail)))
+  let msg = (data && (data.message || (typeof data.detail === "string" && data.detail)))
     || `${response.status} ${response.statusText}`;
+  if (response.status === 412) msg = `Changed by someone else meanwhile: reload the project (${msg})`;
   return new ApiError(response.status, msg, data && data.field);
+}
+
+// Optimistic concurrency: the version of each point, line, polygon and building as this
+// client last loaded it, by its API path. A PATCH or DELETE of one sends it as If-Match, so
+// a change someone else made meanwhile is refused (412) instead of overwritten.
+const versions = new Map();
+const COLLECTIONS = ["points", "lines", "polygons", "buildings"];
+
+function remember(method, base, data) {
+  if (!data || typeof data !== "object") return;
+  for (const key of COLLECTIONS) {
+    if (!base.endsWith(`/${key}`) || !Array.isArray(data[key])) continue;
+    for (const item of data[key]) {
+      if (item && item.id != null && Number.isInteger(item.version)) versions.set(`${base}/${encodeURIComponent(item.id)}`, item.version);
+    }
+  }
+  const parent = method === "POST" ? base : base.slice(0, base.lastIndexOf("/"));
+  if (data.id != null && Number.isInteger(data.version) && COLLECTIONS.some((k) => parent.endsWith(`/${k}`))) {
+    versions.set(`${parent}/${encodeURIComponent(data.id)}`, data.version);
+  }
 }
 
 /** JSON request; `body` is sent as JSON, a FormData as multipart. Resolves to the JSON reply. */
@@ -54,6 +75,9 @@ export async function api(method, path, body) {
     init.headers = headers({ "Content-Type": "application/json" });
     init.body = JSON.stringify(body);
   }
+  const base = path.split("?")[0];
+  const version = method === "PATCH" || method === "DELETE" ? versions.get(base) : undefined;
+  if (version !== undefined) init.headers = { ...init.headers, "If-Match": `"${version}"` };
   let response;
   try {
     response = await fetch(`/api${path}`, init);
@@ -61,8 +85,11 @@ export async function api(method, path, body) {
     throw new ApiError(0, `the gsgeo server cannot be reached (${exc.message})`);
   }
   if (!response.ok) throw await errorOf(response);
+  if (version !== undefined) versions.delete(base); // renamed or deleted: known anew below
   if (response.status === 204) return null;
-  return response.json();
+  const data = await response.json();
+  remember(method, base, data);
+  return data;
 }
 
 /** Download a file from the API (with the token) under the server's file name. */
