@@ -65,3 +65,9 @@ def store(tmp_path, pg_url):
 
 def test_the_borrowed_tests_are_here():
     assert len(TAKEN) > 30 and "test_point_crud" in TAKEN
+
+
+def test_a_nul_character_is_a_422_not_a_500(client):
+    r = client.post("/api/projects", json={"name": "a\u0000b", "crs": "EPSG:27700"})
+    assert r.status_code == 422 and "NUL character" in r.json()["message"]
+    assert client.get("/api/projects").json()["projects"] == []

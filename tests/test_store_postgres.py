@@ -14,8 +14,10 @@ from pgcluster import pg_cluster  # noqa: F401  (the session's PostgreSQL cluste
 from servertools import LONDON, ecef_of, london_rays, rays_at
 
 from gsgeo.cli import main
+from gsgeo.errors import InputError
 from gsgeo.service import Projects
 from gsgeo.store import PointRecord, Project, StoreError, open_store
+from gsgeo.store.base import PointFilter
 
 BNG = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:27700", always_xy=True)
 
@@ -240,3 +242,19 @@ def test_readers_do_not_wait_for_a_long_write(store):
         t.join()
     with store.transaction(write=False) as tx:
         assert tx.get_project("p").name == "after"
+
+
+def test_text_with_a_nul_character_is_refused_naming_it(store, tmp_path):
+    """PostgreSQL text cannot hold U+0000: a clear InputError (the API's 422), not an internal
+    error, and nothing is written."""
+    svc = Projects(store, tmp_path)
+    with pytest.raises(InputError, match=r"'a<NUL>b' holds a NUL character"):
+        svc.create_project(name="a\x00b", crs="EPSG:27700")
+    p = svc.create_project(name="ok", id="ok", crs="EPSG:27700")
+    with pytest.raises(InputError, match="NUL character"):
+        svc.add_point(p.id, {"id": "A", "rays": london_rays(3), "description": "x\x00"})
+    with store.transaction(write=False) as tx:
+        assert [q.id for q in tx.list_projects()] == ["ok"] and tx.list_points("ok") == []
+        assert tx.count_point_records("ok", PointFilter(code="a\\u0000")) == 0
+    with pytest.raises(InputError, match="NUL character"), store.transaction() as tx:
+        tx.count_point_records("ok", PointFilter(code="\x00"))

@@ -13,11 +13,12 @@ re-solve of a whole project does not block them). The schema is created and migr
 from __future__ import annotations
 
 import json
+import re
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from datetime import UTC
-from typing import Any
+from typing import Any, TypeVar
 from urllib.parse import urlsplit
 
 import orjson
@@ -27,6 +28,7 @@ from psycopg import sql
 from psycopg.rows import dict_row
 from psycopg.types.json import set_json_loads
 
+from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSON
 from gsgeo.pointschema import RECORD_KEYS
 from gsgeo.store.base import PointFilter, PointRow, Store, Transaction
@@ -50,15 +52,35 @@ MIGRATE_LOCK = WRITE_LOCK + 1
 CONNECT_TIMEOUT_S = 10
 POOL_SIZE = 16
 Row = dict[str, Any]
+ArgsT = TypeVar("ArgsT", bound=Sequence[object])
+
+
+#: A NUL character escaped in JSON text (an odd number of backslashes before u0000).
+JSON_NUL = re.compile(r"(?<!\\)(\\\\)*\\u0000")
+NUL_MESSAGE = "holds a NUL character (U+0000), which the PostgreSQL store cannot keep"
 
 
 def json_text(value: JSON) -> str:
     """Compact JSON text, as the SQLite store writes it (non-finite numbers as null, numpy
-    values as numbers, integers beyond 64 bits through the standard library)."""
+    values as numbers, integers beyond 64 bits through the standard library). A string with
+    a NUL character is refused (InputError): PostgreSQL's jsonb, which the views and filters
+    read the stored JSON as, cannot hold one."""
     try:
-        return orjson.dumps(value, option=orjson.OPT_SERIALIZE_NUMPY).decode()
+        text = orjson.dumps(value, option=orjson.OPT_SERIALIZE_NUMPY).decode()
     except orjson.JSONEncodeError:
-        return json.dumps(value, separators=(",", ":"), allow_nan=False)
+        text = json.dumps(value, separators=(",", ":"), allow_nan=False)
+    if "u0000" in text and JSON_NUL.search(text):
+        raise InputError(f"a text {NUL_MESSAGE}")
+    return text
+
+
+def nul_free(args: ArgsT) -> ArgsT:
+    """``args`` after checking that no text among them holds a NUL character (PostgreSQL
+    text cannot; SQL would fail with an internal error): InputError naming it otherwise."""
+    for a in args:
+        if isinstance(a, str) and "\x00" in a:
+            raise InputError(f"{a.replace(chr(0), '<NUL>')[:40]!r} {NUL_MESSAGE}")
+    return args
 
 
 def safe_url(url: str) -> str:
@@ -130,13 +152,13 @@ class PostgresTransaction(Transaction):
         self.con = con
 
     def _one(self, query: str, args: tuple = ()) -> Row | None:
-        return self.con.execute(query.encode(), args).fetchone()
+        return self.con.execute(query.encode(), nul_free(args)).fetchone()
 
     def _all(self, query: str, args: tuple = ()) -> list[Row]:
-        return self.con.execute(query.encode(), args).fetchall()
+        return self.con.execute(query.encode(), nul_free(args)).fetchall()
 
     def _count(self, query: str, args: tuple) -> int:
-        cur = self.con.execute(query.encode(), args)
+        cur = self.con.execute(query.encode(), nul_free(args))
         return int(cur.rowcount)
 
     def _exists(self, table: str, where: str, args: tuple) -> bool:
@@ -232,7 +254,7 @@ class PostgresTransaction(Transaction):
     def count_point_records(self, pid: str, where: PointFilter | None = None) -> int:
         cond, args = _point_where(pid, where)
         row = self.con.execute(sql.SQL("SELECT COUNT(*) AS n FROM points WHERE {}").format(cond),
-                               args).fetchone()
+                               nul_free(args)).fetchone()
         return 0 if row is None else int(row["n"])
 
     def page_point_records(self, pid: str, where: PointFilter | None = None, offset: int = 0,
@@ -242,7 +264,7 @@ class PostgresTransaction(Transaction):
         rows = self.con.execute(
             sql.SQL("SELECT id, updated_at, result::text AS result FROM points WHERE {}"
                     " ORDER BY seq LIMIT %s OFFSET %s").format(cond),
-            [*args, limit, offset]).fetchall()
+            nul_free([*args, limit, offset])).fetchall()
         out = []
         for r in rows:
             result = orjson.loads(r["result"])
@@ -312,9 +334,9 @@ class PostgresTransaction(Transaction):
             for p in points:
                 p.updated_at = now
                 p.version += 1  # a new result is a new version of the point
-                yield (None if p.result is None else json_text(p.result), p.error, p.solved_rev,
-                       None if p.frame is None else frame_text(p.frame), now, p.project_id,
-                       p.id)
+                yield nul_free((None if p.result is None else json_text(p.result), p.error,
+                                p.solved_rev, None if p.frame is None else frame_text(p.frame),
+                                now, p.project_id, p.id))
 
         with self.con.cursor() as cur:
             cur.executemany(
@@ -449,8 +471,8 @@ class PostgresTransaction(Transaction):
                 b" z=excluded.z, crs=excluded.crs, role=excluded.role, source=excluded.source,"
                 b" created_at=excluded.created_at, sigma_h=excluded.sigma_h,"
                 b" sigma_v=excluded.sigma_v",
-                [(c.project_id, c.id, c.x, c.y, c.z, c.crs, c.role, c.source, t, c.sigma_h,
-                  c.sigma_v) for c in records],
+                [nul_free((c.project_id, c.id, c.x, c.y, c.z, c.crs, c.role, c.source, t,
+                           c.sigma_h, c.sigma_v)) for c in records],
             )
 
     def delete_check_point(self, pid: str, cid: str) -> bool:
