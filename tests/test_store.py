@@ -363,3 +363,16 @@ def test_update_results_writes_the_measured_state_only(store):
     assert got.result == {"point_id": "A", "x": None}  # non-finite numbers stored as null
     assert got.frame == {"version": 2, "root_transform": [1.0] * 16}
     assert got.rays[0]["origin"] == [1, 2, 3]
+
+
+def test_a_closed_store_opens_again_when_used(store):
+    """As an app's lifespan ends (closing the store) and another begins on the same store."""
+    with store.transaction() as tx:
+        tx.insert_project(Project(id="p", name="p"))
+    store.close()
+    with store.transaction(write=False) as tx:
+        assert [p.id for p in tx.list_projects()] == ["p"]
+    store.close()
+    with store.transaction() as tx:
+        tx.delete_project("p")
+    assert store.revision() is not None

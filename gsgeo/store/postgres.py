@@ -501,17 +501,30 @@ class PostgresStore(Store):
         self.url = url
         self._where = safe_url(url)
         self._local = threading.local()
+        self._pool_size = pool_size
+        self._pool_lock = threading.Lock()
         self._migrate()
-        self._pool: psycopg_pool.ConnectionPool[psycopg.Connection[Row]] = \
-            psycopg_pool.ConnectionPool(
-                url, min_size=1, max_size=pool_size, open=False, configure=_configure,
-                kwargs={"autocommit": True, "row_factory": dict_row,
-                        "connect_timeout": CONNECT_TIMEOUT_S})
-        try:
-            self._pool.open(wait=True, timeout=CONNECT_TIMEOUT_S)
-        except psycopg_pool.PoolTimeout as exc:
-            self._pool.close()
-            raise StoreError(f"{self._where}: cannot open a connection pool: {exc}") from None
+        self._current: psycopg_pool.ConnectionPool[psycopg.Connection[Row]] | None = None
+        self._pool()  # opened now: a failure is the opener's StoreError
+
+    def _pool(self) -> psycopg_pool.ConnectionPool[psycopg.Connection[Row]]:
+        """The connection pool, opened again when the store is used after close()."""
+        with self._pool_lock:
+            if self._current is None:
+                pool: psycopg_pool.ConnectionPool[psycopg.Connection[Row]] = \
+                    psycopg_pool.ConnectionPool(
+                        self.url, min_size=1, max_size=self._pool_size, open=False,
+                        configure=_configure,
+                        kwargs={"autocommit": True, "row_factory": dict_row,
+                                "connect_timeout": CONNECT_TIMEOUT_S})
+                try:
+                    pool.open(wait=True, timeout=CONNECT_TIMEOUT_S)
+                except psycopg_pool.PoolTimeout as exc:
+                    pool.close()
+                    raise StoreError(f"{self._where}: cannot open a connection pool: {exc}") \
+                        from None
+                self._current = pool
+            return self._current
 
     def _connect(self) -> psycopg.Connection[Row]:
         try:
@@ -574,9 +587,9 @@ class PostgresStore(Store):
     def revision(self) -> int | None:
         """The count of committed write transactions (every server's)."""
         try:
-            with self._pool.connection() as con:
+            with self._pool().connection() as con:
                 row = con.execute("SELECT n FROM gsgeo_revision").fetchone()
-        except (psycopg.Error, psycopg_pool.PoolTimeout):
+        except (psycopg.Error, psycopg_pool.PoolTimeout, StoreError):
             return None
         return None if row is None else int(row["n"])
 
@@ -586,8 +599,9 @@ class PostgresStore(Store):
         if con is not None:  # nested: part of the enclosing transaction
             yield PostgresTransaction(con)
             return
+        pool = self._pool()
         try:
-            con = self._pool.getconn()
+            con = pool.getconn()
         except psycopg_pool.PoolTimeout as exc:
             raise StoreError(f"{self._where}: no connection free ({exc}); try again") from None
         except psycopg.OperationalError as exc:
@@ -616,7 +630,7 @@ class PostgresStore(Store):
             raise StoreError(f"{self._where}: {' '.join(str(exc).split())}") from None
         finally:
             self._local.con = None
-            self._pool.putconn(con)
+            pool.putconn(con)
 
     def check_integrity(self) -> list[str]:
         with self.transaction(write=False) as tx:
@@ -629,5 +643,8 @@ class PostgresStore(Store):
                 f"{r['point_id']}" for r in rows]
 
     def close(self) -> None:
-        """Close the pool's connections."""
-        self._pool.close()
+        """Close the pool's connections; the store opens a new pool if it is used again."""
+        with self._pool_lock:
+            pool, self._current = self._current, None
+        if pool is not None:
+            pool.close()
