@@ -40,6 +40,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="keep projects in a PostgreSQL + PostGIS database, "
                         "postgresql://USER[:PASSWORD]@HOST:PORT/DATABASE, which several servers "
                         "may share (default: $GSGEO_STORE, else DATA/gsgeo.sqlite)")
+    p.add_argument("--scenes", default=None, metavar="URL",
+                   help="http(s) URL of a static host or object store holding a copy of the "
+                        "scene folders: the viewer fetches the tiles of DATA/scenes/<name> from "
+                        "URL/<name>/ (the host must allow the viewer's origin: CORS); "
+                        "tileset.json, with the georeference, is still served from DATA")
+    p.add_argument("--scene-url", action="append", default=[], metavar="NAME=URL",
+                   help="the folder URL of one scene's tiles (overrides --scenes for it; "
+                        "repeatable)")
     p.set_defaults(run=run)
 
 
@@ -68,7 +76,11 @@ def run(args: argparse.Namespace) -> int:
     if data.exists() and not data.is_dir():
         raise InputError(f"--data {data}: is not a directory")
     from gsgeo.server.hosts import resolved_addresses
+    from gsgeo.server.scenehosts import parse_scene_url, scene_hosts
 
+    # callers such as `gsgeo demo` may leave these out; a bad URL exits 2 before anything starts
+    scene_urls = dict(parse_scene_url(s) for s in getattr(args, "scene_url", None) or [])
+    hosts = scene_hosts(getattr(args, "scenes", None), scene_urls)
     if not resolved_addresses(args.host):
         raise InputError(f"--host {args.host}: does not resolve to an address to bind")
     token, generated = resolve_token(args.host)
@@ -91,12 +103,17 @@ def run(args: argparse.Namespace) -> int:
     config = ServerConfig(data_dir=data, host=args.host, port=args.port, token=token,
                           store_url=store_url,
                           web_dir=Path(args.web) if args.web else None,
-                          solver_threads=solver_threads)
+                          solver_threads=solver_threads, scenes_url=hosts.base,
+                          scene_urls=dict(hosts.folders))
     app = create_app(config)  # opens (and migrates) the store before accepting requests
     common = {"host": args.host, "port": args.port, "log_level": log_level,
               "server_header": False, "limit_concurrency": 1000, "timeout_keep_alive": 30}
     print(f"gsgeo serve: data {data.resolve()}; http://{args.host}:{args.port}/ "
           "(API docs at /docs)", file=sys.stderr, flush=True)
+    for where in ([hosts.base + "<name>/"] if hosts.base else []) + list(hosts.folders.values()):
+        print(f"gsgeo serve: scene tiles from {where}: that host must answer "
+              f"'Access-Control-Allow-Origin: http://{args.host}:{args.port}' (or *)",
+              file=sys.stderr, flush=True)
     if workers == 1:
         uvicorn.Server(uvicorn.Config(app, **common)).run()
     else:

@@ -152,7 +152,8 @@ def crs_search(q: Annotated[str, Query(min_length=1, max_length=200,
 
 @router.get("/scenes", summary="Scenes in DATA/scenes with their georeference")
 def scenes(request: Request) -> dict[str, Any]:
-    return {"scenes": list_scenes(request.app.state.config.data_dir)}
+    return {"scenes": list_scenes(request.app.state.config.data_dir,
+                                  request.app.state.scene_hosts)}
 
 
 # projects --------------------------------------------------------------------------------

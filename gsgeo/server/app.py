@@ -31,6 +31,7 @@ from gsgeo.server.guard import BodyTooLarge, Guard, MiB
 from gsgeo.server.hosts import is_loopback
 from gsgeo.server.intersect_pool import IntersectPool
 from gsgeo.server.routing import allowed_methods, body_limiter
+from gsgeo.server.scenehosts import hosted_tileset_response, scene_hosts
 from gsgeo.server.scenes import SceneFolders
 from gsgeo.service import ConflictError, NotFoundError, Store, StoreError, open_projects
 
@@ -55,6 +56,10 @@ class ServerConfig:
     solver_threads: int = 1  # long-lived threads for POST /api/intersect (gsgeo.server.intersect_pool)
     store_url: str | None = None  # postgresql://... (gsgeo.store.open_store); None: DATA/gsgeo.sqlite
     allowed_hosts: set[str] | None = field(default=None)  # None: derived from host
+    # Tiles on a static host (gsgeo.server.scenehosts): the base URL of the scene folders,
+    # and folder URLs of single scenes (name -> URL). None / empty: tiles from /scenes/.
+    scenes_url: str | None = None
+    scene_urls: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.data_dir = Path(self.data_dir)
@@ -163,6 +168,7 @@ The API is at <a href="/docs">/docs</a>; scenes are listed at
 
 def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     """The application; ``store`` defaults to the SQLite store of ``config.data_dir``."""
+    hosts = scene_hosts(config.scenes_url, config.scene_urls)  # InputError on a bad URL
     projects = open_projects(config.data_dir, store, config.store_url)  # store_url: None: SQLite
     store = projects.store
     intersect_pool = IntersectPool(config.solver_threads)
@@ -196,6 +202,7 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     app.include_router(ogc_router)
 
     scene_folders = SceneFolders(config.data_dir)
+    app.state.scene_hosts = hosts
     # ServerConfig.__post_init__ always sets both folders.
     web_dir, cesium_dir = Path(cast(Path, config.web_dir)), Path(cast(Path, config.cesium_dir))
 
@@ -206,6 +213,10 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
         folder = scene_folders.folder(name)
         if folder is None:
             return _error(404, "no such scene")
+        tiles_url = hosts.folder(name)
+        if rel == "tileset.json" and tiles_url is not None:
+            return hosted_tileset_response(request, folder, tiles_url, SCENE_CACHE,
+                                           scene_folders.refused())
         return file_response(request, folder, rel, SCENE_CACHE, refuse=scene_folders.refused())
 
     @app.api_route("/cesium/{rel:path}", methods=["GET", "HEAD"], include_in_schema=False)
@@ -260,6 +271,7 @@ def config_to_env(config: ServerConfig) -> str:
                        "web_dir": str(config.web_dir), "cesium_dir": str(config.cesium_dir),
                        "max_body": config.max_body, "max_upload": config.max_upload,
                        "solver_threads": config.solver_threads, "store_url": config.store_url,
+                       "scenes_url": config.scenes_url, "scene_urls": config.scene_urls,
                        "allowed_hosts": sorted(config.allowed_hosts)
                        if config.allowed_hosts is not None else None})
 

@@ -10,6 +10,9 @@ A scene is a folder whose real path (links followed) lies inside the real scenes
 tilesets on another disk, make ``DATA/scenes`` itself the link. A scenes folder that is the
 data directory or encloses it serves nothing, and the store's own files are never served
 whatever the links (``SceneFolders.refused``).
+
+A scene's tiles may come from a static host instead (gsgeo.server.scenehosts); its
+tileset.json is still read from, and listed by, the data directory.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gsgeo.server.scenehosts import SceneHosts
 from gsgeo.service import DB_NAME
 from gsgeo.service.validate import SLUG
 
@@ -98,7 +102,8 @@ def scene_info(scene_dir: Path) -> dict[str, Any]:
         info["georef_version"] = state.version
         info["bounds"] = _bounds(tileset)
         info["splat_count"] = _splat_count(scene_dir)
-    except (GsgeoError, OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (GsgeoError, OSError, ValueError, KeyError, TypeError, AttributeError,
+            RecursionError) as exc:  # nested beyond the parser's depth
         info["error"] = f"tileset.json cannot be read: {exc}"
     with _cache_lock:
         _cache[ts] = (key, info)
@@ -170,6 +175,9 @@ class SceneFolders:
                 yield d
 
 
-def list_scenes(data_dir: Path) -> list[dict[str, Any]]:
-    """Every servable scene of the data directory with its georeference (``scene_info``)."""
-    return [scene_info(d) for d in SceneFolders(data_dir).scenes()]
+def list_scenes(data_dir: Path, hosts: SceneHosts | None = None) -> list[dict[str, Any]]:
+    """Every servable scene of the data directory with its georeference (``scene_info``) and
+    ``tiles_url``: the folder URL its tiles come from (``hosts``), None when from this server."""
+    hosts = hosts or SceneHosts()
+    return [{**scene_info(d), "tiles_url": hosts.folder(d.name)}
+            for d in SceneFolders(data_dir).scenes()]
