@@ -49,6 +49,8 @@ from gsgeo.store.sqlite import StoreError, now_iso
 WRITE_LOCK = 0x6773_6765_6F
 #: Another one, held while the schema is migrated.
 MIGRATE_LOCK = WRITE_LOCK + 1
+BEGIN_WRITE = (f"BEGIN ISOLATION LEVEL READ COMMITTED; SELECT pg_advisory_xact_lock({WRITE_LOCK})"
+               .encode())
 CONNECT_TIMEOUT_S = 10
 POOL_SIZE = 16
 Row = dict[str, Any]
@@ -281,23 +283,25 @@ class PostgresTransaction(Transaction):
         return [r["id"] for r in rows]
 
     def insert_point(self, p: PointRecord) -> None:
-        if self._exists("points", "project_id = %s AND id = %s", (p.project_id, p.id)):
-            raise ConflictError(f"point '{p.id}' already exists")
         p.created_at = p.updated_at = now_iso()
         p.version = 1
-        row = self._one("SELECT COALESCE(MAX(seq), 0) + 1 AS n FROM points WHERE project_id = %s",
-                        (p.project_id,))
-        p.seq = 1 if row is None else int(row["n"])
-        self._write(
+        # one statement (the hot path of every measured point): the next seq (writers are
+        # serialised), and no row when the id is taken
+        row = self._one(
             "INSERT INTO points (project_id, id, seq, code, description, rays, excluded, result,"
             " error, solved_rev, created_at, updated_at, frame, version)"
-            " VALUES (%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,1)",
-            (p.project_id, p.id, p.seq, p.code, p.description, json_text(p.rays),
+            " SELECT %s, %s, COALESCE(MAX(seq), 0) + 1, %s, %s, %s, %s, %s, %s, %s, %s, %s, %s, 1"
+            " FROM points WHERE project_id = %s"
+            " ON CONFLICT (project_id, id) DO NOTHING RETURNING seq",
+            (p.project_id, p.id, p.code, p.description, json_text(p.rays),
              json_text(p.excluded), None if p.result is None else json_text(p.result),
              p.error, p.solved_rev,
-             p.created_at, p.updated_at, None if p.frame is None else json_text(p.frame)),
-            f"point '{p.id}'",
+             p.created_at, p.updated_at, None if p.frame is None else json_text(p.frame),
+             p.project_id),
         )
+        if row is None:
+            raise ConflictError(f"point '{p.id}' already exists")
+        p.seq = int(row["seq"])
 
     def update_point(self, p: PointRecord, old_id: str | None = None) -> None:
         key = (p.project_id, old_id or p.id)
@@ -609,15 +613,12 @@ class PostgresStore(Store):
         self._local.con = con
         try:
             try:
-                if write:
-                    con.execute("BEGIN ISOLATION LEVEL READ COMMITTED")
-                    con.execute("SELECT pg_advisory_xact_lock(%s)", (WRITE_LOCK,))
-                else:
-                    con.execute("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY")
+                # (several statements, no parameters: one round trip)
+                con.execute(BEGIN_WRITE if write else b"BEGIN ISOLATION LEVEL REPEATABLE READ"
+                                                      b" READ ONLY")
                 yield PostgresTransaction(con)
-                if write:
-                    con.execute("UPDATE gsgeo_revision SET n = n + 1")
-                con.execute("COMMIT")
+                con.execute(b"UPDATE gsgeo_revision SET n = n + 1; COMMIT" if write
+                            else b"COMMIT")
             except BaseException:
                 if not con.closed and con.info.transaction_status != \
                         psycopg.pq.TransactionStatus.IDLE:
