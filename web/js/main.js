@@ -11,6 +11,7 @@ import { TOOLS, activeTool, activate, handlerOf, release, toolByShortcut } from 
 import { georefPanel } from "./georef.js";
 import { buildingsPanel } from "./buildings.js";
 import { georefVersion, moveCamera } from "./similarity.js";
+import { tileFailureText } from "./scenehost.js";
 
 const Cesium = window.Cesium;
 
@@ -140,7 +141,17 @@ async function loadScene(name, view = null) {
   $("#scene-select").value = name;
   try {
     const tileset = await Cesium.Cesium3DTileset.fromUrl(info.url, { maximumScreenSpaceError: 8 });
-    tileset.tileFailed.addEventListener((e) => message(`A tile of '${name}' failed to load: ${e.message}`, true));
+    let hostFailed = false; // one message per scene load, not one per tile
+    tileset.tileFailed.addEventListener((e) => {
+      const text = tileFailureText(name, info.tiles_url, e, location.origin);
+      if (info.tiles_url) {
+        if (hostFailed) return;
+        hostFailed = true;
+        msg.hidden = false;
+        msg.textContent = text;
+      }
+      message(text, true);
+    });
     window.gsgeo.tilesReady = false;
     tileset.initialTilesLoaded.addEventListener(() => { window.gsgeo.tilesReady = true; });
     viewer.scene.primitives.add(tileset);
