@@ -3,7 +3,7 @@
 # with python3 (>= 3.11) and, where missing, installs python3-venv and Node.js's npm through apt.
 #   bash scripts/install.sh          the package, its run-time dependencies and the web client
 #   bash scripts/install.sh --test   the same plus the test tools and Debian's chromium, proj-data,
-#                                    QGIS, PostgreSQL 15 and PostGIS
+#                                    QGIS, PostgreSQL 15, PostGIS and nginx
 # Afterwards: `.venv/bin/gsgeo ...`, or `. .venv/bin/activate` once and then `gsgeo ...`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -58,6 +58,8 @@ if [ "$test_deps" = 1 ]; then
     # PostgreSQL 15 and PostGIS for the store tests' throw-away cluster (tests/pgcluster.py).
     [ -x /usr/lib/postgresql/15/bin/initdb ] || missing+=(postgresql-15)
     [ -f /usr/share/postgresql/15/extension/postgis.control ] || missing+=(postgresql-15-postgis-3)
+    # nginx as the static host of scene tiles (tests/e2e/test_static_scenes.py).
+    [ -x /usr/sbin/nginx ] || missing+=(nginx-light)
     if [ "${#missing[@]}" -gt 0 ]; then apt_install "${missing[@]}"; fi
     # Debian's QGIS Python and its providers (OAPIF) for the QGIS plugin's headless test;
     # where apt has no QGIS, that test skips and says why.
