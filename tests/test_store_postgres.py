@@ -258,3 +258,58 @@ def test_text_with_a_nul_character_is_refused_naming_it(store, tmp_path):
         assert tx.count_point_records("ok", PointFilter(code="a\\u0000")) == 0
     with pytest.raises(InputError, match="NUL character"), store.transaction() as tx:
         tx.count_point_records("ok", PointFilter(code="\x00"))
+
+
+QGIS_READS_LAYER = """
+import json, sys
+from qgis.core import QgsApplication, QgsVectorLayer, QgsWkbTypes
+app = QgsApplication([], False)
+app.initQgis()
+out = {}
+for kind in ("points", "lines", "polygons"):
+    # no type or SRID given: QGIS reads them from geometry_columns, as 'Add PostGIS Layers' does
+    layer = QgsVectorLayer(sys.argv[1] + f' key=fid table="public"."gsgeo_site_b_{kind}" (geom)',
+                           kind, "postgres")
+    feats = list(layer.getFeatures()) if layer.isValid() else []
+    out[kind] = {"valid": layer.isValid(), "crs": layer.crs().authid(),
+                 "type": QgsWkbTypes.displayString(layer.wkbType()), "n": len(feats),
+                 "fields": [f.name() for f in layer.fields()],
+                 "first": [feats[0]["point_id"], feats[0].geometry().constGet().z()]
+                 if kind == "points" and feats else None}
+print(json.dumps(out))
+app.exitQgis()
+"""
+
+
+def test_qgis_opens_the_views_as_typed_layers_in_the_grid(cluster, db, store, tmp_path):
+    """Debian's QGIS (python3-qgis) loads each view through its PostGIS provider, as a GIS
+    analyst would: PointZ / LineStringZ / PolygonZ in EPSG:27700 with the record columns."""
+    import json
+    import os
+    import subprocess
+
+    from test_qgis_plugin import QGIS_PYTHON, qgis_missing
+
+    reason = qgis_missing()
+    if reason is not None:
+        pytest.skip(reason)
+    svc = Projects(store, tmp_path)
+    p = svc.create_project(name="b", id="site-b", crs="EPSG:27700")
+    for k in range(3):
+        svc.add_point(p.id, {"id": f"P{k}", "rays": rays_at(ecef_of(LONDON[0] + 1e-4 * k,
+                                                                      LONDON[1] + 1e-4 * (k == 2),
+                                                                      45.0), 3)})
+    svc.add_feature(p.id, "line", {"id": "L", "points": ["P0", "P1"]})
+    svc.add_feature(p.id, "polygon", {"id": "G", "points": ["P0", "P1", "P2"]})
+    conninfo = f"dbname='{db}' host=127.0.0.1 port={cluster.port} user='postgres'"
+    proc = subprocess.run([QGIS_PYTHON, "-c", QGIS_READS_LAYER, conninfo], capture_output=True,
+                          text=True, cwd="/", timeout=120,
+                          env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert {k: (v["valid"], v["crs"], v["type"], v["n"]) for k, v in got.items()} == {
+        "points": (True, "EPSG:27700", "PointZ", 3), "lines": (True, "EPSG:27700", "LineStringZ", 1),
+        "polygons": (True, "EPSG:27700", "PolygonZ", 1)}
+    assert {"point_id", "easting", "northing", "height", "sigma_h", "measured_at"} <= \
+        set(got["points"]["fields"])
+    assert got["points"]["first"] == ["P0", svc.get_point(p.id, "P0").record["height"]]
