@@ -376,3 +376,46 @@ def test_a_closed_store_opens_again_when_used(store):
     with store.transaction() as tx:
         tx.delete_project("p")
     assert store.revision() is not None
+
+
+def test_pages_of_point_records_follow_the_filter_reference(store):
+    """page_point_records / count_point_records (what the OGC API pages with) give, on each
+    backend, exactly the solved points PointFilter.matches passes, in creation order."""
+    from datetime import UTC, datetime, timedelta, timezone
+
+    from gsgeo.store.base import PointFilter
+
+    t0 = datetime(2026, 5, 1, 12, 0, tzinfo=UTC)
+    with store.transaction() as tx:
+        tx.insert_project(Project(id="p", name="p"))
+        for k in range(12):
+            when = t0 + timedelta(minutes=k)
+            stamp = when.astimezone(timezone(timedelta(hours=k % 3))).isoformat(
+                timespec="milliseconds")
+            stamp = "not a time" if k == 5 else stamp
+            result = {"point_id": f"A{k}", "code": "kerb" if k % 2 else "wall",
+                      "lon": 179.5 + 0.1 * k - (360 if k > 5 else 0), "lat": 10.0 + k,
+                      "easting": 1000.0 * k, "northing": 5e5 + k, "measured_at": stamp}
+            tx.insert_point(PointRecord(project_id="p", id=f"A{k}", rays=london_rays(2),
+                                        code=result["code"], result=result))
+        tx.insert_point(PointRecord(project_id="p", id="unsolved", rays=london_rays(2),
+                                    error="no result"))
+    filters = [None, PointFilter(code="kerb"), PointFilter(code="none"),
+               PointFilter(measured_from=t0 + timedelta(minutes=3)),
+               PointFilter(measured_to=t0 + timedelta(minutes=4), code="wall"),
+               PointFilter(measured_from=t0 + timedelta(minutes=2, seconds=30),
+                           measured_to=t0 + timedelta(minutes=9)),
+               PointFilter(box=("easting", "northing", 2500.0, 0.0, 8000.0, 1e6)),
+               PointFilter(box=("lon", "lat", 179.0, 10.0, -179.0, 30.0)),  # over the antimeridian
+               PointFilter(box=("lon", "lat", 179.0, 10.0, -179.0, 30.0), code="kerb",
+                           measured_from=t0)]
+    with store.transaction(write=False) as tx:
+        everything = [p for p in tx.list_points("p") if p.record is not None]
+        for f in filters:
+            want = [p.id for p in everything if (f or PointFilter()).matches(p.record)]
+            rows = tx.page_point_records("p", f)
+            assert [r.id for r in rows] == want, f
+            assert tx.count_point_records("p", f) == len(want), f
+            assert [r.id for r in tx.page_point_records("p", f, offset=1, limit=2)] == want[1:3]
+            assert all(r.record == everything[int(r.id[1:])].record for r in rows)
+    assert len(everything) == 12
