@@ -6,6 +6,8 @@ absolute URLs on that host. The browser test with nginx is tests/e2e/test_static
 from __future__ import annotations
 
 import json
+import shutil
+import subprocess
 import warnings
 
 import pytest
@@ -18,6 +20,7 @@ from gsgeo.cli import main
 from gsgeo.errors import InputError
 from gsgeo.server.app import ServerConfig, app_from_env, config_to_env, create_app
 from gsgeo.server.scenehosts import absolute_uris, folder_url, scene_hosts
+from tests.conftest import REPO
 
 TILESET = {
     "asset": {"version": "1.1"},
@@ -192,3 +195,25 @@ def test_worker_processes_get_the_scene_hosts(tmp_path, monkeypatch):
     with TestClient(app_from_env()) as c:
         scenes = {s["name"]: s["tiles_url"] for s in c.get("/api/scenes").json()["scenes"]}
     assert scenes == {"box": BASE + "/box/", "one": "https://bucket.example/one/"}
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="Node.js is not installed")
+def test_viewer_message_for_a_failed_tile():
+    """web/js/scenehost.js: a refused tile from the static host (no status: what a missing CORS
+    header looks like) names the host and the header; a 404 names the status and the tile."""
+    src = (f"import {{ tileFailureText as t }} from '{(REPO / 'web/js/scenehost.js').as_uri()}';\n"
+           "const page = 'http://127.0.0.1:8000';\n"
+           "console.log(JSON.stringify([\n"
+           "  t('box', 'http://s.example:81/scenes/box/', {url: 'http://s.example:81/scenes/box/"
+           "tiles/0.glb', message: 'Request has failed.'}, page),\n"
+           "  t('box', 'http://s.example:81/scenes/box/', {url: 'http://s.example:81/scenes/box/"
+           "tiles/0.glb', message: 'Request has failed. Status Code: 404'}, page),\n"
+           "  t('box', null, {url: '/scenes/box/tiles/0.glb', message: 'Request has failed.'}, page),"
+           "\n]));")
+    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
+                         text=True, check=True, timeout=60)
+    cors, missing, local = json.loads(out.stdout)
+    assert "http://s.example:81" in cors and "CORS" in cors
+    assert "Access-Control-Allow-Origin: http://127.0.0.1:8000" in cors
+    assert "HTTP 404" in missing and "tiles/0.glb" in missing and "CORS" not in missing
+    assert local == "A tile of 'box' failed to load: Request has failed."
