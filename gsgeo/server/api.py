@@ -23,6 +23,7 @@ from starlette.background import BackgroundTask
 from gsgeo import __version__
 from gsgeo.errors import InputError
 from gsgeo.server import models as m
+from gsgeo.server.etags import IfMatch, if_match_versions, with_etag
 from gsgeo.server.scenes import list_scenes
 from gsgeo.service import CheckPointRecord, FeatureRecord, PointRecord, Project, Projects
 from gsgeo.service.checkpoints import CheckPointRow
@@ -46,6 +47,9 @@ router = APIRouter(prefix="/api", responses={
     404: {"model": ErrorBody, "description": "no such project, point, line, polygon, building "
                                              "or check point"},
     409: {"model": ErrorBody, "description": "id already taken, or the point is still in use"},
+    412: {"model": ErrorBody, "description": "If-Match names a version of the item that is no "
+                                             "longer stored (changed by someone else); the "
+                                             "answer's ETag is the current one"},
     413: {"model": ErrorBody, "description": "request body over the size limit"},
     422: {"model": ErrorBody, "description": "malformed request; message names the field"},
     503: {"model": ErrorBody, "description": "the project store is busy or unavailable"},
@@ -91,13 +95,14 @@ def point_json(pt: PointRecord) -> dict[str, Any]:
     return {"id": pt.id, "code": pt.code, "description": pt.description, "rays": pt.rays,
             "excluded": pt.excluded, "status": "solved" if pt.result is not None else "failed",
             "error": pt.error, "record": pt.record, "result": pt.result,
-            "frame": pt.frame, "created_at": pt.created_at, "updated_at": pt.updated_at}
+            "frame": pt.frame, "created_at": pt.created_at, "updated_at": pt.updated_at,
+            "version": pt.version}
 
 
 def feature_json(f: FeatureRecord, measures: dict[str, Any] | None = None) -> dict[str, Any]:
     return {"id": f.id, "kind": f.kind, "points": f.point_ids, "code": f.code,
             "description": f.description, "measures": measures,
-            "created_at": f.created_at, "updated_at": f.updated_at}
+            "created_at": f.created_at, "updated_at": f.updated_at, "version": f.version}
 
 
 # info, intersect, crs, scenes --------------------------------------------------------------
@@ -238,27 +243,32 @@ def list_points(pid: PID, request: Request,
 @router.post("/projects/{pid}/points", status_code=201, response_model=JSON_OBJECT,
              summary="Solve and store a point")
 def create_point(pid: PID, body: m.PointCreate, request: Request) -> dict[str, Any] | Response:
-    return fast_json(point_json(svc(request).add_point(pid, body.to_input())), 201)
+    pt = svc(request).add_point(pid, body.to_input())
+    return with_etag(fast_json(point_json(pt), 201), pt.version)
 
 
-@router.get("/projects/{pid}/points/{point_id}", response_model=JSON_OBJECT, summary="One point")
+@router.get("/projects/{pid}/points/{point_id}", response_model=JSON_OBJECT,
+            summary="One point (ETag: its version)")
 def get_point(pid: PID, point_id: ITEM, request: Request) -> dict[str, Any] | Response:
-    return fast_json(point_json(svc(request).get_point(pid, point_id)))
+    pt = svc(request).get_point(pid, point_id)
+    return with_etag(fast_json(point_json(pt)), pt.version)
 
 
 @router.patch("/projects/{pid}/points/{point_id}", response_model=JSON_OBJECT,
               summary="Rename, recode, exclude or restore a ray, or replace rays (re-solves)")
-def patch_point(pid: PID, point_id: ITEM, body: m.PointPatch,
-                request: Request) -> dict[str, Any] | Response:
+def patch_point(pid: PID, point_id: ITEM, body: m.PointPatch, request: Request,
+                if_match: IfMatch = None) -> dict[str, Any] | Response:
     changes = {k: v for k, v in body.model_dump(exclude_unset=True).items() if v is not None}
     if body.rays is not None:
         changes["rays"] = m.rays_of(body.rays)
-    return fast_json(point_json(svc(request).update_point(pid, point_id, changes)))
+    pt = svc(request).update_point(pid, point_id, changes, if_match_versions(if_match))
+    return with_etag(fast_json(point_json(pt)), pt.version)
 
 
 @router.delete("/projects/{pid}/points/{point_id}", status_code=204, summary="Delete a point")
-def delete_point(pid: PID, point_id: ITEM, request: Request) -> Response:
-    svc(request).delete_point(pid, point_id)
+def delete_point(pid: PID, point_id: ITEM, request: Request,
+                 if_match: IfMatch = None) -> Response:
+    svc(request).delete_point(pid, point_id, if_match_versions(if_match))
     return Response(status_code=204)
 
 
@@ -267,22 +277,30 @@ def _feature_routes(kind: str, plural: str) -> None:
     def list_(pid: PID, request: Request) -> dict[str, Any]:
         return {plural: [feature_json(f, ms) for f, ms in svc(request).list_features(pid, kind)]}
 
-    def create(pid: PID, body: m.FeatureCreate, request: Request) -> dict[str, Any]:
+    def create(pid: PID, body: m.FeatureCreate, request: Request,
+               response: Response) -> dict[str, Any]:
         s = svc(request)
         f = s.add_feature(pid, kind, body.model_dump())
-        return feature_json(*s.get_feature(pid, kind, f.id))
+        f, measures = s.get_feature(pid, kind, f.id)
+        with_etag(response, f.version)
+        return feature_json(f, measures)
 
-    def get(pid: PID, fid: ITEM, request: Request) -> dict[str, Any]:
-        return feature_json(*svc(request).get_feature(pid, kind, fid))
+    def get(pid: PID, fid: ITEM, request: Request, response: Response) -> dict[str, Any]:
+        f, measures = svc(request).get_feature(pid, kind, fid)
+        with_etag(response, f.version)
+        return feature_json(f, measures)
 
-    def patch(pid: PID, fid: ITEM, body: m.FeaturePatch, request: Request) -> dict[str, Any]:
+    def patch(pid: PID, fid: ITEM, body: m.FeaturePatch, request: Request, response: Response,
+              if_match: IfMatch = None) -> dict[str, Any]:
         s = svc(request)
         changes = {k: v for k, v in body.model_dump(exclude_unset=True).items() if v is not None}
-        f = s.update_feature(pid, kind, fid, changes)
-        return feature_json(*s.get_feature(pid, kind, f.id))
+        f = s.update_feature(pid, kind, fid, changes, if_match_versions(if_match))
+        f, measures = s.get_feature(pid, kind, f.id)
+        with_etag(response, f.version)
+        return feature_json(f, measures)
 
-    def delete(pid: PID, fid: ITEM, request: Request) -> Response:
-        svc(request).delete_feature(pid, kind, fid)
+    def delete(pid: PID, fid: ITEM, request: Request, if_match: IfMatch = None) -> Response:
+        svc(request).delete_feature(pid, kind, fid, if_match_versions(if_match))
         return Response(status_code=204)
 
     what = "lengths" if kind == "line" else "area and perimeter"
@@ -291,7 +309,8 @@ def _feature_routes(kind: str, plural: str) -> None:
                          operation_id=f"list_{plural}")
     router.add_api_route(base, create, methods=["POST"], status_code=201,
                          summary=f"Create a {kind} from point ids", operation_id=f"create_{kind}")
-    router.add_api_route(base + "/{fid}", get, methods=["GET"], summary=f"One {kind}",
+    router.add_api_route(base + "/{fid}", get, methods=["GET"],
+                         summary=f"One {kind} (ETag: its version)",
                          operation_id=f"get_{kind}")
     router.add_api_route(base + "/{fid}", patch, methods=["PATCH"],
                          summary=f"Change a {kind}", operation_id=f"patch_{kind}")
@@ -316,29 +335,33 @@ def create_building(pid: PID, body: m.BuildingCreate,
                     request: Request) -> dict[str, Any] | Response:
     """The answer: the model (adjusted vertices in the grid, surfaces, adjustment, measures,
     warnings) and ``vertices_ecef`` (ECEF metres, in the order of ``vertices``)."""
-    return fast_json(svc(request).add_building(pid, body.model_dump(exclude_unset=True)), 201)
+    b = svc(request).add_building(pid, body.model_dump(exclude_unset=True))
+    return with_etag(fast_json(b, 201), b["version"])
 
 
 @router.get("/projects/{pid}/buildings/{bid}", response_model=JSON_OBJECT,
-            summary="One building with its model")
+            summary="One building with its model (ETag: its version)")
 def get_building(pid: PID, bid: ITEM, request: Request) -> dict[str, Any] | Response:
-    return fast_json(svc(request).get_building(pid, bid))
+    b = svc(request).get_building(pid, bid)
+    return with_etag(fast_json(b), b["version"])
 
 
 @router.patch("/projects/{pid}/buildings/{bid}", response_model=JSON_OBJECT,
               summary="Change a building (roofs, ground, attributes, id); rebuilds it")
-def patch_building(pid: PID, bid: ITEM, body: m.BuildingPatch,
-                   request: Request) -> dict[str, Any] | Response:
+def patch_building(pid: PID, bid: ITEM, body: m.BuildingPatch, request: Request,
+                   if_match: IfMatch = None) -> dict[str, Any] | Response:
     changes = body.model_dump(exclude_unset=True)
     for key, value in changes.items():
         if value is None:
             raise InputError("must not be null", field=key)
-    return fast_json(svc(request).update_building(pid, bid, changes))
+    b = svc(request).update_building(pid, bid, changes, if_match_versions(if_match))
+    return with_etag(fast_json(b), b["version"])
 
 
 @router.delete("/projects/{pid}/buildings/{bid}", status_code=204, summary="Delete a building")
-def delete_building(pid: PID, bid: ITEM, request: Request) -> Response:
-    svc(request).delete_building(pid, bid)
+def delete_building(pid: PID, bid: ITEM, request: Request,
+                    if_match: IfMatch = None) -> Response:
+    svc(request).delete_building(pid, bid, if_match_versions(if_match))
     return Response(status_code=204)
 
 

@@ -25,6 +25,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gsgeo import __version__
 from gsgeo.errors import GsgeoError, InputError
+from gsgeo.server.etags import precondition_failed
 from gsgeo.server.faults import CatchAll
 from gsgeo.server.files import file_response
 from gsgeo.server.guard import BodyTooLarge, Guard, MiB
@@ -33,7 +34,14 @@ from gsgeo.server.intersect_pool import IntersectPool
 from gsgeo.server.routing import allowed_methods, body_limiter
 from gsgeo.server.scenehosts import hosted_tileset_response, scene_hosts
 from gsgeo.server.scenes import SceneFolders
-from gsgeo.service import ConflictError, NotFoundError, Store, StoreError, open_projects
+from gsgeo.service import (
+    ConflictError,
+    NotFoundError,
+    PreconditionFailed,
+    Store,
+    StoreError,
+    open_projects,
+)
 
 log = logging.getLogger("gsgeo.server")
 
@@ -115,6 +123,8 @@ def _install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(ConflictError)
     async def conflict(_req: Request, exc: ConflictError) -> JSONResponse:
         return _error(409, str(exc), exc.field)
+
+    app.add_exception_handler(PreconditionFailed, precondition_failed)  # 412, a ConflictError
 
     @app.exception_handler(StoreError)
     async def store_error(_req: Request, exc: StoreError) -> JSONResponse:
