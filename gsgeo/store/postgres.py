@@ -53,6 +53,8 @@ BEGIN_WRITE = (f"BEGIN ISOLATION LEVEL READ COMMITTED; SELECT pg_advisory_xact_l
                .encode())
 CONNECT_TIMEOUT_S = 10
 POOL_SIZE = 16
+#: Connections opened at once (a request then rarely waits for the pool to grow).
+POOL_MIN = 4
 Row = dict[str, Any]
 ArgsT = TypeVar("ArgsT", bound=Sequence[object])
 
@@ -517,7 +519,8 @@ class PostgresStore(Store):
             if self._current is None:
                 pool: psycopg_pool.ConnectionPool[psycopg.Connection[Row]] = \
                     psycopg_pool.ConnectionPool(
-                        self.url, min_size=1, max_size=self._pool_size, open=False,
+                        self.url, min_size=min(POOL_MIN, self._pool_size),
+                        max_size=self._pool_size, open=False,
                         configure=_configure,
                         kwargs={"autocommit": True, "row_factory": dict_row,
                                 "connect_timeout": CONNECT_TIMEOUT_S})
