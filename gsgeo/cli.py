@@ -34,6 +34,7 @@ COMMANDS = {
     "demo": "gsgeo.commands.demo",
     "report": "gsgeo.commands.report",
     "georef": "gsgeo.commands.georef",
+    "users": "gsgeo.commands.users",
 }
 
 EXIT_USAGE = 2

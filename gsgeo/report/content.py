@@ -8,6 +8,7 @@ sigmas, residuals and accuracy figures in millimetres with 1 decimal (``fmt_mm``
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -475,6 +476,37 @@ def _points_section(data: JSONObject) -> Section:
     return Section(f"Measured points ({len(pts) + len(ecef)})", "points", blocks)
 
 
+def _values(v: JSON, limit: int = 160) -> str:
+    """Before/after values of an audit entry as compact JSON text, cut at ``limit``."""
+    if v is None:
+        return DASH
+    text = json.dumps(v, separators=(",", ":"), ensure_ascii=False, default=str)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
+def _audit_section(data: JSONObject) -> Section:
+    audit = data.get("audit") or {}
+    entries = audit.get("entries") or []
+    counts = audit.get("counts") or {}
+    total = int(audit.get("total") or 0)
+    if not entries:
+        return Section("Audit trail", "audit", [Notes(["No change has been recorded."])])
+    blocks: list[Block] = [_table(
+        [("Action", False), ("Entries", True)],
+        [[str(a), str(n)] for a, n in sorted(counts.items())],
+        caption=f"{total} changes recorded in all, by action.")]
+    shown = f"The latest {len(entries)} of {total}" if total > len(entries) else "All"
+    blocks.append(_table(
+        [("When (UTC)", False), ("Who", False), ("Action", False), ("What", False),
+         ("Before", False), ("After", False)],
+        [[str(e.get("at")), str(e.get("user")), str(e.get("action")),
+          f"{e.get('kind')} {e.get('item')}" if e.get("item") else str(e.get("kind")),
+          _values(e.get("before")), _values(e.get("after"))] for e in entries],
+        caption=f"{shown} changes, newest first; the whole trail is at "
+                "GET /api/projects/{id}/audit."))
+    return Section(f"Audit trail ({total})", "audit", blocks)
+
+
 def _summary(data: JSONObject) -> Facts:
     p = data["project"]
     acc = (data.get("accuracy") or {}).get("asprs")
@@ -507,5 +539,5 @@ def build_report(data: JSONObject) -> Report:
         generated=f"{gen.get('at', '')} by {gen.get('by', 'gsgeo')}",
         summary=_summary(data),
         sections=[_project_section(data), _frames_section(data), _georef_section(data),
-                  _accuracy_section(data), _points_section(data)],
+                  _accuracy_section(data), _points_section(data), _audit_section(data)],
     )

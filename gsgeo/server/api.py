@@ -26,6 +26,7 @@ from gsgeo.server import models as m
 from gsgeo.server.etags import IfMatch, if_match_versions, with_etag
 from gsgeo.server.scenes import list_scenes
 from gsgeo.service import CheckPointRecord, FeatureRecord, PointRecord, Project, Projects
+from gsgeo.service.audit import audit_page
 from gsgeo.service.checkpoints import CheckPointRow
 from gsgeo.service.measuring import measure
 from gsgeo.service.projects import intersect_point
@@ -43,7 +44,8 @@ class ErrorBody(m.BaseModel):
 router = APIRouter(prefix="/api", responses={
     400: {"model": ErrorBody, "description": "Host header not served, or bad Content-Length"},
     401: {"model": ErrorBody, "description": "token missing or wrong (server bound off loopback)"},
-    403: {"model": ErrorBody, "description": "cross-origin request"},
+    403: {"model": ErrorBody, "description": "cross-origin request, or a change asked for "
+                                             "with a viewer's token"},
     404: {"model": ErrorBody, "description": "no such project, point, line, polygon, building "
                                              "or check point"},
     409: {"model": ErrorBody, "description": "id already taken, or the point is still in use"},
@@ -96,7 +98,7 @@ def point_json(pt: PointRecord) -> dict[str, Any]:
             "excluded": pt.excluded, "status": "solved" if pt.result is not None else "failed",
             "error": pt.error, "record": pt.record, "result": pt.result,
             "frame": pt.frame, "created_at": pt.created_at, "updated_at": pt.updated_at,
-            "version": pt.version}
+            "version": pt.version, "measured_by": pt.measured_by}
 
 
 def feature_json(f: FeatureRecord, measures: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -165,6 +167,21 @@ def scenes(request: Request) -> dict[str, Any]:
 @router.get("/projects", summary="List projects")
 def list_projects(request: Request) -> dict[str, Any]:
     return {"projects": [project_json(p) for p in svc(request).list_projects()]}
+
+
+@router.get("/projects/{pid}/audit",
+            summary="The project's audit trail: who changed what, when, before and after")
+def project_audit(pid: PID, request: Request,
+                  item: Annotated[str | None, Query(max_length=100, description=(
+                      "only the entries of this point, line, polygon, building or check "
+                      "point id"))] = None,
+                  offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
+                  limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+                  order: Annotated[Literal["newest", "oldest"], Query(
+                      description="newest first (default) or oldest first")] = "newest",
+                  ) -> dict[str, Any]:
+    return audit_page(svc(request).store, pid, item=item, offset=offset, limit=limit,
+                      newest_first=order == "newest")
 
 
 @router.post("/projects", status_code=201, summary="Create a project")

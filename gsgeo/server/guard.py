@@ -9,6 +9,12 @@
   from ``#token=`` so that Cesium's own tile requests carry it); otherwise 401. The API
   takes no cookie: a browser sends cookies by itself, headers only when a script adds them,
   so no page of another site can make a request count as the user's.
+- Accounts (gsgeo.service.accounts): a user's own token counts as the token does; the request
+  is then made as that user (the audit trail's "who", set with gsgeo.service.audit.acting_as),
+  the server's token as "admin-token", no token on loopback (when none is configured) as
+  "local". Off loopback a token is required even when none is configured. A ``viewer`` may
+  only read: any other method than GET/HEAD/OPTIONS on /api or /ogc (POST /api/intersect,
+  which stores nothing, aside) gets 403 naming the role.
 - The Host header must be one the server answers to (defeats DNS rebinding on loopback).
 - An /api or /ogc request from a browser page of another origin (``Origin`` header not matching the
   Host) gets 403: CORS is closed, and this also stops cross-site form posts.
@@ -21,8 +27,13 @@ import secrets
 from collections.abc import Callable
 from urllib.parse import unquote
 
+import anyio.to_thread
 from starlette.requests import cookie_parser
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from gsgeo.server.hosts import is_loopback
+from gsgeo.service.accounts import authenticate
+from gsgeo.service.audit import LOCAL, acting_as
 
 MiB = 1024 * 1024
 
@@ -31,6 +42,14 @@ GUARDED = ("/api", "/ogc")
 
 #: Name (or name prefix, ``gsgeo-token-PORT``) of the cookie that carries the token to /scenes.
 TOKEN_COOKIE = "gsgeo-token"
+
+#: Who a request made with the server's own token (--token, GSGEO_TOKEN) is recorded as.
+ADMIN_TOKEN_ACTOR = "admin-token"
+#: Methods a viewer may use; and the one POST that stores nothing.
+READ_METHODS = ("GET", "HEAD", "OPTIONS")
+READ_POSTS = ("/api/intersect",)
+#: At most this many presented tokens are looked up (a request offers one or two).
+MAX_TOKENS = 4
 
 
 class BodyTooLarge(Exception):
@@ -84,12 +103,40 @@ class Guard:
         self.allowed_hosts = ({h.lower() for h in allowed_hosts}
                               if allowed_hosts and "*" not in allowed_hosts else None)
         self.body_limit = body_limit
+        self.loopback: bool | None = None  # the server's bind address is loopback (lazily)
 
-    def _token_ok(self, headers: dict[str, str], with_cookie: bool) -> bool:
-        want = self.token.encode()  # type: ignore[union-attr]
+    def _token_ok(self, tokens: list[str]) -> bool:
+        if self.token is None:
+            return False
+        want = self.token.encode()
         # every candidate compared, so the time taken does not tell which one came close
-        return any([secrets.compare_digest(t.encode(), want)
-                    for t in presented_tokens(headers, with_cookie)])
+        return any([secrets.compare_digest(t.encode(), want) for t in tokens])
+
+    def _open_on_loopback(self, scope: Scope) -> bool:
+        """Whether a request may come without a token: no token is configured and the server
+        is bound to loopback (its config, read once from the app)."""
+        if self.token is not None:
+            return False
+        if self.loopback is None:
+            config = getattr(getattr(scope.get("app"), "state", None), "config", None)
+            host = getattr(config, "host", None)
+            self.loopback = host is None or is_loopback(str(host))
+        return self.loopback
+
+    async def _identify(self, scope: Scope, tokens: list[str]) -> tuple[str, str] | None:
+        """(user name, role) of the request, or None when it must be refused (401)."""
+        if self._token_ok(tokens):
+            return ADMIN_TOKEN_ACTOR, "admin"
+        projects = getattr(getattr(scope.get("app"), "state", None), "projects", None)
+        store = getattr(projects, "store", None)
+        if store is not None:
+            for t in tokens[:MAX_TOKENS]:
+                user = await anyio.to_thread.run_sync(authenticate, store, t)
+                if user is not None:
+                    return user.name, user.role
+        if self._open_on_loopback(scope):
+            return LOCAL, "admin"
+        return None
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -115,14 +162,25 @@ class Guard:
                                  "Origin")
                 return
         is_scene = path == "/scenes" or path.startswith("/scenes/")
-        if self.token is not None and (is_api or is_scene) \
-                and not self._token_ok(headers, with_cookie=is_scene):
-            await _send_json(send, 401, "a valid token is required: send "
-                             "'Authorization: Bearer TOKEN' (see the server's start "
-                             "message or GSGEO_TOKEN); the viewer takes it from "
-                             "/#token=TOKEN", "Authorization",
-                             [(b"www-authenticate", b"Bearer")])
-            return
+        who = (LOCAL, "admin")
+        if is_api or is_scene:
+            found = await self._identify(scope, presented_tokens(headers, with_cookie=is_scene))
+            if found is None:
+                await _send_json(send, 401, "a valid token is required: send "
+                                 "'Authorization: Bearer TOKEN' (the server's token, see its "
+                                 "start message or GSGEO_TOKEN, or a user's, made with "
+                                 "'gsgeo users add'); the viewer takes it from "
+                                 "/#token=TOKEN", "Authorization",
+                                 [(b"www-authenticate", b"Bearer")])
+                return
+            who = found
+            method = str(scope.get("method", "GET")).upper()
+            if is_api and who[1] == "viewer" and method not in READ_METHODS \
+                    and not (method == "POST" and path in READ_POSTS):
+                await _send_json(send, 403, f"user '{who[0]}' has the role viewer, which may "
+                                 f"only read: {method} {path[:120]} changes data (ask an admin "
+                                 "for the surveyor role)", "Authorization")
+                return
         limit: int | None = None
 
         def body_limit() -> int:  # looked up only for requests that have a body
@@ -161,7 +219,8 @@ class Guard:
             await send(msg)
 
         try:
-            await self.app(scope, limited_receive, tracking_send)
+            with acting_as(who[0]):
+                await self.app(scope, limited_receive, tracking_send)
         except BodyTooLarge:
             if not started:
                 await _send_json(send, 413, f"request body exceeds the limit of "

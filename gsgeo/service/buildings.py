@@ -32,6 +32,7 @@ from gsgeo.buildings.spec import BuildingSpec, building_to_json, parse_building,
 from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.georef.control import grid_to_ecef
 from gsgeo.jsontypes import JSON, JSONObject
+from gsgeo.service import audit
 from gsgeo.service.measuring import json_ready, solve_settings
 from gsgeo.service.validate import item_id
 from gsgeo.store.base import Store, Transaction
@@ -325,6 +326,8 @@ class BuildingService:
         with self.store.transaction() as tx:
             p = self._building_project(tx, pid)
             r = self._store_building(tx, p, doc)
+            audit.record(tx, pid, "created", "building", r.record.id, None,
+                         audit.building_values(r.record))
         return building_json(r, p, self.data_dir)
 
     def _store_building(self, tx: Transaction, p: Project, doc: JSONObject) -> BuildingResult:
@@ -354,6 +357,7 @@ class BuildingService:
             b = self._stored_building(tx, pid, bid)
             require_version(f"building '{bid}'", b.version, if_match)
             old = b.id
+            was = audit.building_values(b)
             b.spec = self._checked_spec(tx, pid, dict(b.spec) | dict(changes))
             b.id = b.spec["id"]
             if b.id != old and tx.get_building(pid, b.id) is not None:
@@ -361,6 +365,8 @@ class BuildingService:
                                     field="id")
             r = self.built_in(tx, p, b, strict=True)
             tx.update_building(b, old_id=old)
+            before, after = audit.changed(was, audit.building_values(b))
+            audit.record(tx, pid, "changed", "building", old, before, after)
         return building_json(r, p, self.data_dir)
 
     def delete_building(self, pid: str, bid: str,
@@ -370,3 +376,4 @@ class BuildingService:
             b = self._stored_building(tx, pid, bid)
             require_version(f"building '{bid}'", b.version, if_match)
             tx.delete_building(pid, bid)
+            audit.record(tx, pid, "deleted", "building", bid, audit.building_values(b), None)

@@ -30,6 +30,7 @@ from gsgeo.measure.accuracy import accuracy_report
 from gsgeo.measure.batch import measure_batch_json
 from gsgeo.measure.checkpoints import check_points_in_grid as points_in_grid
 from gsgeo.measure.rays import SolveSettings
+from gsgeo.service import audit
 from gsgeo.service.buildings import BuildingService, buildings_using, rename_point
 from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, read_check_points
 from gsgeo.service.georeferencing import (
@@ -204,6 +205,7 @@ class Projects(BuildingService):
                     scene_version=None if ctx is None else ctx.version)
         with self.store.transaction() as tx:
             tx.insert_project(p)
+            audit.record(tx, pid, "created", "project", None, None, audit.project_values(p))
         return p
 
     def _check_scene(self, scene: str) -> str:
@@ -222,6 +224,7 @@ class Projects(BuildingService):
             raise InputError("not a project field", field=sorted(unknown)[0])
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
+            was = audit.project_values(p)
             if "name" in changes:
                 name = _text(changes["name"], "name", 200).strip()
                 if not name:
@@ -249,6 +252,10 @@ class Projects(BuildingService):
                     p.settings_rev += 1
                     self._remeasure_all(tx, p)
             tx.update_project(p)
+            before, after = audit.changed(was, audit.project_values(p))
+            if after or before:
+                kind = "settings" if any(k in after for k in SETTINGS) else "project"
+                audit.record(tx, pid, "changed", kind, None, before, after)
             return p
 
     def remeasure_all(self, pid: str) -> Project:
@@ -259,6 +266,8 @@ class Projects(BuildingService):
             p.settings_rev += 1
             self._remeasure_all(tx, p)
             tx.update_project(p)
+            audit.record(tx, pid, "re-solved", "project", None, None,
+                         {"settings_rev": p.settings_rev})
             return p
 
     def _remeasure_all(self, tx: Transaction, p: Project) -> None:
@@ -335,8 +344,10 @@ class Projects(BuildingService):
 
     def delete_project(self, pid: str) -> None:
         with self.store.transaction() as tx:
-            if not tx.delete_project(pid):
+            p = tx.get_project(pid)
+            if p is None or not tx.delete_project(pid):
                 raise NotFoundError(f"project '{pid}' does not exist")
+            audit.record(tx, pid, "deleted", "project", None, audit.project_values(p), None)
 
     # points ---------------------------------------------------------------------------
     def _measure_into(self, pt: PointRecord, p: Project, strict: bool = False,
@@ -406,9 +417,11 @@ class Projects(BuildingService):
             ctx = scene_frame(self.data_dir, p.scene)
             pt = PointRecord(project_id=pid, id=point_id, rays=new.rays.to_json(), code=code,
                              description=description, excluded=excluded,
-                             frame=frame_record(ctx, new.georef_version))
+                             frame=frame_record(ctx, new.georef_version),
+                             measured_by=audit.current_actor())
             self._measure_into(pt, p, strict=True, rays=new.rays, ctx=ctx)
             tx.insert_point(pt)
+            audit.record(tx, pid, "created", "point", pt.id, None, audit.point_values(pt))
             return pt
 
     @staticmethod
@@ -441,10 +454,12 @@ class Projects(BuildingService):
             p = self._project(tx, pid)
             pt = self._point(tx, pid, point_id)
             require_version(f"point '{point_id}'", pt.version, if_match)
+            was = audit.point_values(pt)
             remeasure = False
             typed = None
             if changes.get("rays") is not None:
                 typed = rays_input(changes["rays"])
+                pt.measured_by = audit.current_actor()
                 pt.rays = typed.to_json()
                 pt.frame = frame_record(scene_frame(self.data_dir, p.scene),
                                         georef_version(changes.get("georef_version")))
@@ -489,6 +504,10 @@ class Projects(BuildingService):
                             f.point_ids = [pt.id if q == old_id else q for q in f.point_ids]
                             tx.update_feature(f)
                 rename_point(tx, pid, old_id, pt.id)
+            before, after = audit.changed(was, audit.point_values(pt))
+            action = "ray excluded" if changes.get("exclude_ray") is not None else \
+                "ray restored" if changes.get("restore_ray") is not None else "changed"
+            audit.record(tx, pid, action, "point", old_id, before, after)
             return pt
 
     def delete_point(self, pid: str, point_id: str,
@@ -505,6 +524,7 @@ class Projects(BuildingService):
                 raise ConflictError(f"point '{point_id}' is used by {', '.join(users)}; "
                                     "delete or change those first")
             tx.delete_point(pid, point_id)
+            audit.record(tx, pid, "deleted", "point", point_id, audit.point_values(pt), None)
 
     def import_session(self, pid: str, doc: JSON) -> dict[str, int]:
         """Add the points, lines, polygons and buildings of a session JSON document, all or
@@ -534,7 +554,8 @@ class Projects(BuildingService):
                 typed = sp.to_rays()
                 pt = PointRecord(project_id=pid, id=point_id, rays=typed.to_json(),
                                  code=sp.code, description=sp.description,
-                                 frame=frame_record(scene_frame(self.data_dir, p.scene)))
+                                 frame=frame_record(scene_frame(self.data_dir, p.scene)),
+                                 measured_by=audit.current_actor())
                 try:
                     self._measure_into(pt, p, strict=True, rays=typed)
                 except GsgeoError as exc:
@@ -557,6 +578,11 @@ class Projects(BuildingService):
                     self._store_building(tx, p, building_to_json(spec))
                 except GsgeoError as exc:
                     raise exc.within(f"buildings[{i}]") from None
+            audit.record(tx, pid, "imported", "session", None, None, {
+                "points": [sp.id for sp in session.points],
+                "lines": [f.id for f in session.lines],
+                "polygons": [f.id for f in session.polygons],
+                "buildings": [b.id for b in session.buildings]})
         counts = {"points": len(session.points), "lines": len(session.lines),
                   "polygons": len(session.polygons)}
         return counts | ({"buildings": len(session.buildings)} if session.buildings else {})
@@ -626,6 +652,7 @@ class Projects(BuildingService):
                               code=_text(doc.get("code"), "code", 200),
                               description=_text(doc.get("description"), "description"))
             tx.insert_feature(f)
+            audit.record(tx, pid, "created", kind, fid, None, audit.feature_values(f))
             return f
 
     def update_feature(self, pid: str, kind: str, fid: str, changes: JSONObject,
@@ -638,6 +665,7 @@ class Projects(BuildingService):
         with self.store.transaction() as tx:
             f = self._feature(tx, pid, kind, fid)
             require_version(f"{kind} '{fid}'", f.version, if_match)
+            was = audit.feature_values(f)
             if changes.get("points") is not None:
                 f.point_ids = self._feature_points(tx, pid, kind, changes["points"])
             if changes.get("code") is not None:
@@ -651,6 +679,8 @@ class Projects(BuildingService):
                     raise ConflictError(f"{kind} '{f.id}' already exists in project '{pid}'",
                                         field="id")
             tx.update_feature(f, old_id=old)
+            before, after = audit.changed(was, audit.feature_values(f))
+            audit.record(tx, pid, "changed", kind, old, before, after)
             return f
 
     def delete_feature(self, pid: str, kind: str, fid: str,
@@ -659,6 +689,7 @@ class Projects(BuildingService):
             f = self._feature(tx, pid, kind, fid)
             require_version(f"{kind} '{fid}'", f.version, if_match)
             tx.delete_feature(pid, kind, fid)
+            audit.record(tx, pid, "deleted", kind, fid, audit.feature_values(f), None)
 
     # georeference ---------------------------------------------------------------------
     def georeference_status(self, pid: str) -> JSONObject:
@@ -738,7 +769,7 @@ class Projects(BuildingService):
                           "root_transform": column_major(state.root_transform),
                           "similarity": column_major(sol.similarity.matrix())}}
 
-        report, n = self._change_scene(pid, fit_and_write)
+        report, n = self._change_scene(pid, fit_and_write, "georeferenced")
         return json_ready(report | {"remeasured_points": n})
 
     def undo_georeference(self, pid: str) -> JSONObject:
@@ -749,11 +780,12 @@ class Projects(BuildingService):
                     "root_transform": column_major(state.root_transform),
                     "similarity": column_major(sim)}
 
-        out, n = self._change_scene(pid, restore)
+        out, n = self._change_scene(pid, restore, "georeference undone")
         return json_ready(out | {"remeasured_points": n})
 
     def _change_scene(self, pid: str, change: Callable[[Transaction, Project, Path, SceneFrame],
-                                                       JSONObject]) -> tuple[JSONObject, int]:
+                                                       JSONObject],
+                      action: str) -> tuple[JSONObject, int]:
         """Run ``change`` (which writes the scene's tileset.json) and re-measure every point of
         every project on the scene, in one store transaction; the tileset is put back when
         the store cannot follow. Returns what ``change`` returned and the points re-measured."""
@@ -770,6 +802,12 @@ class Projects(BuildingService):
                 out = change(tx, p, path, ctx)
                 written = (path, before)
                 n = self._remeasure_scene(tx, p.scene, ctx)
+                now = scene_frame(self.data_dir, p.scene)
+                audit.record(tx, pid, action, "scene", p.scene,
+                             {"version": ctx.version, "root_transform": column_major(ctx.root)},
+                             {"version": None if now is None else now.version,
+                              "root_transform": None if now is None else column_major(now.root),
+                              "remeasured_points": n})
         except BaseException as exc:
             if written is not None:
                 restore_on_failure(*written, exc)
@@ -835,9 +873,11 @@ class Projects(BuildingService):
                                  sigma_h=r.sigma_h, sigma_v=r.sigma_v) for r in rows]
         with self.store.transaction() as tx:
             self._project(tx, pid)
-            if replace:
-                tx.delete_all_check_points(pid)
+            replaced = tx.delete_all_check_points(pid) if replace else 0
             tx.upsert_check_points(recs)
+            audit.record(tx, pid, f"{role} points imported", "check point", None,
+                         {"replaced": replaced} if replace else None,
+                         {"ids": ids, "crs": crs.strip(), "role": role, "source": source[:300]})
         return len(recs)
 
     def import_check_point_file(self, pid: str, data: bytes, filename: str | None, *,
@@ -862,13 +902,19 @@ class Projects(BuildingService):
     def delete_check_point(self, pid: str, cid: str) -> None:
         with self.store.transaction() as tx:
             self._project(tx, pid)
-            if not tx.delete_check_point(pid, cid):
+            was = next((c for c in tx.list_check_points(pid) if c.id == cid), None)
+            if was is None or not tx.delete_check_point(pid, cid):
                 raise NotFoundError(f"check point '{cid}' does not exist in project '{pid}'")
+            audit.record(tx, pid, "deleted", "check point", cid, audit.check_point_values(was),
+                         None)
 
     def delete_all_check_points(self, pid: str) -> int:
         with self.store.transaction() as tx:
             self._project(tx, pid)
-            return tx.delete_all_check_points(pid)
+            n = tx.delete_all_check_points(pid)
+            if n:
+                audit.record(tx, pid, "deleted", "check point", None, {"count": n}, None)
+            return n
 
     def accuracy(self, pid: str, role: str = "check") -> JSONObject:
         """Measured minus check point coordinates in the project's grid, matched by id."""

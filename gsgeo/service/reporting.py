@@ -24,6 +24,7 @@ from gsgeo import __version__
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.jsontypes import JSONObject
 from gsgeo.measure.accuracy import asprs_accuracy
+from gsgeo.service.audit import audit_page
 from gsgeo.service.measuring import json_ready
 from gsgeo.service.projects import Projects
 from gsgeo.store.records import CheckPointRecord, PointRecord, Project
@@ -199,6 +200,10 @@ def _point_rows(points: list[PointRecord]) -> tuple[list[JSONObject], list[JSONO
     return grid, ecef, failed
 
 
+#: How many of the latest audit entries the report lists (the counts cover all of them).
+AUDIT_ROWS = 50
+
+
 def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
                 georeference: JSONObject | None = None) -> JSONObject:
     """Everything the survey report of project ``pid`` shows, as plain JSON.
@@ -228,6 +233,8 @@ def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
         "failed_points": failed,
         "check_points": {"check": sum(1 for c in cps if c.role == "check"),
                          "control": len(control)},
+        # the latest changes (newest first) and how many of each action there are in all
+        "audit": audit_page(svc.store, pid, limit=AUDIT_ROWS),
     }
     return dict(json_ready(doc))
 

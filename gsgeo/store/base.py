@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from gsgeo.jsontypes import JSONObject
+from gsgeo.store.accountrecords import AuditEntry, UserRecord
 from gsgeo.store.records import (
     BuildingRecord,
     CheckPointRecord,
@@ -177,6 +178,32 @@ class Transaction(ABC):
     def delete_check_point(self, pid: str, cid: str) -> bool: ...
     @abstractmethod
     def delete_all_check_points(self, pid: str) -> int: ...
+
+    # users (accounts) -----------------------------------------------------------------
+    @abstractmethod
+    def list_users(self) -> list[UserRecord]:
+        """Every user, by name."""
+    @abstractmethod
+    def insert_user(self, user: UserRecord) -> None:
+        """Store a new user (ConflictError when the name is taken); sets ``created_at``."""
+    @abstractmethod
+    def delete_user(self, name: str) -> bool: ...
+    @abstractmethod
+    def user_by_token_hash(self, token_hash: str) -> UserRecord | None:
+        """The user whose token has this hash (hex SHA-256), if any."""
+
+    # the audit trail (append-only: nothing updates or deletes an entry) ---------------
+    @abstractmethod
+    def append_audit(self, entry: AuditEntry) -> None:
+        """Append ``entry``; sets its ``at`` (UTC now) and ``seq``."""
+    @abstractmethod
+    def list_audit(self, pid: str, item: str | None = None, offset: int = 0,
+                   limit: int | None = None, newest_first: bool = True) -> list[AuditEntry]:
+        """A page of the project's entries (only those of ``item`` when given), newest first
+        or oldest first."""
+    @abstractmethod
+    def count_audit(self, pid: str, item: str | None = None) -> dict[str, int]:
+        """How many entries the project has (of ``item`` when given), per action."""
 
 
 class Store(ABC):

@@ -132,6 +132,30 @@ MIGRATIONS: list[str] = [
     ALTER TABLE features ADD COLUMN version INTEGER NOT NULL DEFAULT 1 CHECK (version >= 1);
     ALTER TABLE buildings ADD COLUMN version INTEGER NOT NULL DEFAULT 1 CHECK (version >= 1);
     """,
+    # 7: accounts and the audit trail: users with a role and the SHA-256 of their token (never
+    # the token); per project an append-only list of changes (who, when, what, before/after
+    # as JSON), kept when the project is deleted; each point names who measured it
+    """
+    CREATE TABLE users (
+        name TEXT PRIMARY KEY,
+        role TEXT NOT NULL CHECK (role IN ('admin', 'surveyor', 'viewer')),
+        token_hash TEXT NOT NULL UNIQUE,
+        created_at TEXT NOT NULL
+    );
+    CREATE TABLE audit (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        project_id TEXT NOT NULL,
+        at TEXT NOT NULL,
+        actor TEXT NOT NULL,
+        action TEXT NOT NULL,
+        kind TEXT NOT NULL,
+        item TEXT,
+        before TEXT CHECK (before IS NULL OR json_valid(before)),
+        after TEXT CHECK (after IS NULL OR json_valid(after))
+    );
+    CREATE INDEX audit_project ON audit(project_id, seq);
+    ALTER TABLE points ADD COLUMN measured_by TEXT;
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

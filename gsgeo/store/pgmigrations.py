@@ -91,6 +91,30 @@ MIGRATIONS: list[str] = [
     );
     INSERT INTO gsgeo_revision (n) VALUES (0);
     """,
+    # 2: accounts and the audit trail (as SQLite's migration 7): users with a role and the
+    # SHA-256 of their token; per project an append-only list of changes, kept when the
+    # project is deleted; each point names who measured it
+    """
+    CREATE TABLE users (
+        name TEXT PRIMARY KEY,
+        role TEXT NOT NULL CHECK (role IN ('admin', 'surveyor', 'viewer')),
+        token_hash TEXT NOT NULL UNIQUE,
+        created_at TEXT NOT NULL
+    );
+    CREATE TABLE audit (
+        seq BIGSERIAL PRIMARY KEY,
+        project_id TEXT NOT NULL,
+        at TEXT NOT NULL,
+        actor TEXT NOT NULL,
+        action TEXT NOT NULL,
+        kind TEXT NOT NULL,
+        item TEXT,
+        before JSON,
+        after JSON
+    );
+    CREATE INDEX audit_project ON audit(project_id, seq);
+    ALTER TABLE points ADD COLUMN measured_by TEXT;
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -31,6 +31,7 @@ from psycopg.types.json import set_json_loads
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSON
 from gsgeo.pointschema import RECORD_KEYS
+from gsgeo.store.accountrecords import AuditEntry, UserRecord
 from gsgeo.store.base import PointFilter, PointRow, Store, Transaction
 from gsgeo.store.pgmigrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.pgviews import create_views, drop_views
@@ -246,12 +247,13 @@ class PostgresTransaction(Transaction):
                            rays=row["rays"], excluded=row["excluded"], result=row["result"],
                            error=row["error"], solved_rev=row["solved_rev"],
                            created_at=row["created_at"], updated_at=row["updated_at"],
-                           frame=row["frame"], version=row["version"])
+                           frame=row["frame"], version=row["version"],
+                           measured_by=row["measured_by"])
 
     def list_points(self, pid: str, results: bool = True) -> list[PointRecord]:
         cols = "*" if results else ("project_id, id, seq, code, description, rays, excluded, "
                                     "NULL::json AS result, error, solved_rev, created_at,"
-                                    " updated_at, frame, version")
+                                    " updated_at, frame, version, measured_by")
         rows = self._all(f"SELECT {cols} FROM points WHERE project_id = %s ORDER BY seq", (pid,))
         return [self._point(r) for r in rows]
 
@@ -291,15 +293,16 @@ class PostgresTransaction(Transaction):
         # serialised), and no row when the id is taken
         row = self._one(
             "INSERT INTO points (project_id, id, seq, code, description, rays, excluded, result,"
-            " error, solved_rev, created_at, updated_at, frame, version)"
-            " SELECT %s, %s, COALESCE(MAX(seq), 0) + 1, %s, %s, %s, %s, %s, %s, %s, %s, %s, %s, 1"
+            " error, solved_rev, created_at, updated_at, frame, version, measured_by)"
+            " SELECT %s, %s, COALESCE(MAX(seq), 0) + 1, %s, %s, %s, %s, %s, %s, %s, %s, %s, %s,"
+            " 1, %s"
             " FROM points WHERE project_id = %s"
             " ON CONFLICT (project_id, id) DO NOTHING RETURNING seq",
             (p.project_id, p.id, p.code, p.description, json_text(p.rays),
              json_text(p.excluded), None if p.result is None else json_text(p.result),
              p.error, p.solved_rev,
              p.created_at, p.updated_at, None if p.frame is None else json_text(p.frame),
-             p.project_id),
+             p.measured_by, p.project_id),
         )
         if row is None:
             raise ConflictError(f"point '{p.id}' already exists")
@@ -313,12 +316,12 @@ class PostgresTransaction(Transaction):
         p.updated_at = now_iso()
         n = self._write(
             "UPDATE points SET id=%s, code=%s, description=%s, rays=%s, excluded=%s, result=%s,"
-            " error=%s, solved_rev=%s, updated_at=%s, frame=%s, version=version+1"
-            " WHERE project_id=%s AND id=%s AND version=%s",
+            " error=%s, solved_rev=%s, updated_at=%s, frame=%s, measured_by=%s,"
+            " version=version+1 WHERE project_id=%s AND id=%s AND version=%s",
             (p.id, p.code, p.description, json_text(p.rays), json_text(p.excluded),
              None if p.result is None else json_text(p.result),
              p.error, p.solved_rev,
-             p.updated_at, None if p.frame is None else json_text(p.frame),
+             p.updated_at, None if p.frame is None else json_text(p.frame), p.measured_by,
              *key, p.version),
             f"point '{p.id}'",
         )
@@ -487,6 +490,59 @@ class PostgresTransaction(Transaction):
 
     def delete_all_check_points(self, pid: str) -> int:
         return self._count("DELETE FROM check_points WHERE project_id = %s", (pid,))
+
+    # users ----------------------------------------------------------------------------
+    @staticmethod
+    def _user(r: Row) -> UserRecord:
+        return UserRecord(name=r["name"], role=r["role"], token_hash=r["token_hash"],
+                          created_at=r["created_at"])
+
+    def list_users(self) -> list[UserRecord]:
+        return [self._user(r) for r in self._all("SELECT * FROM users ORDER BY name")]
+
+    def insert_user(self, u: UserRecord) -> None:
+        if self._exists("users", "name = %s", (u.name,)):
+            raise ConflictError(f"user '{u.name}' already exists")
+        u.created_at = now_iso()
+        self._write("INSERT INTO users (name, role, token_hash, created_at)"
+                    " VALUES (%s, %s, %s, %s)", (u.name, u.role, u.token_hash, u.created_at),
+                    f"user '{u.name}'")
+
+    def delete_user(self, name: str) -> bool:
+        return self._count("DELETE FROM users WHERE name = %s", (name,)) > 0
+
+    def user_by_token_hash(self, token_hash: str) -> UserRecord | None:
+        row = self._one("SELECT * FROM users WHERE token_hash = %s", (token_hash,))
+        return None if row is None else self._user(row)
+
+    # the audit trail ------------------------------------------------------------------
+    def append_audit(self, e: AuditEntry) -> None:
+        e.at = now_iso()
+        row = self._one(
+            "INSERT INTO audit (project_id, at, actor, action, kind, item, before, after)"
+            " VALUES (%s, %s, %s, %s, %s, %s, %s, %s) RETURNING seq",
+            (e.project_id, e.at, e.actor, e.action, e.kind, e.item,
+             None if e.before is None else json_text(e.before),
+             None if e.after is None else json_text(e.after)))
+        e.seq = 0 if row is None else int(row["seq"])
+
+    def list_audit(self, pid: str, item: str | None = None, offset: int = 0,
+                   limit: int | None = None, newest_first: bool = True) -> list[AuditEntry]:
+        cond, args = ("project_id = %s", [pid]) if item is None else \
+            ("project_id = %s AND item = %s", [pid, item])
+        order = "DESC" if newest_first else "ASC"
+        rows = self._all(f"SELECT * FROM audit WHERE {cond} ORDER BY seq {order}"
+                         " LIMIT %s OFFSET %s", (*args, limit, offset))
+        return [AuditEntry(project_id=r["project_id"], actor=r["actor"], action=r["action"],
+                           kind=r["kind"], item=r["item"], before=r["before"],
+                           after=r["after"], at=r["at"], seq=int(r["seq"])) for r in rows]
+
+    def count_audit(self, pid: str, item: str | None = None) -> dict[str, int]:
+        cond, args = ("project_id = %s", (pid,)) if item is None else \
+            ("project_id = %s AND item = %s", (pid, item))
+        rows = self._all(f"SELECT action, COUNT(*) AS n FROM audit WHERE {cond}"
+                         " GROUP BY action ORDER BY action", args)
+        return {r["action"]: int(r["n"]) for r in rows}
 
 
 def _configure(con: psycopg.Connection[Any]) -> None:

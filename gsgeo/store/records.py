@@ -104,6 +104,9 @@ class PointRecord:
     # 1 when inserted, +1 on every update of the stored item (optimistic concurrency: the
     # API's ETag); the store writes it, a caller never sets it
     version: int = 1
+    # who measured it (the rays): a user's name, "local" for the operator on loopback; None
+    # for points stored before accounts existed
+    measured_by: str | None = None
 
     def __post_init__(self) -> None:
         if self.record is None and self.result is not None:

@@ -21,6 +21,7 @@ import orjson
 from gsgeo.errors import GsgeoError
 from gsgeo.jsontypes import JSON
 from gsgeo.pointschema import RECORD_KEYS
+from gsgeo.store.accountrecords import AuditEntry, UserRecord
 from gsgeo.store.base import PointFilter, PointRow, Store, Transaction
 from gsgeo.store.migrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.records import (
@@ -186,12 +187,13 @@ class SQLiteTransaction(Transaction):
                            result=_loads(row["result"]),
                            error=row["error"], solved_rev=row["solved_rev"],
                            created_at=row["created_at"], updated_at=row["updated_at"],
-                           frame=_loads(row["frame"]), version=row["version"])
+                           frame=_loads(row["frame"]), version=row["version"],
+                           measured_by=row["measured_by"])
 
     def list_points(self, pid: str, results: bool = True) -> list[PointRecord]:
         cols = "*" if results else ("project_id, id, seq, code, description, rays, excluded, "
                                     "NULL AS result, error, solved_rev, created_at, updated_at, "
-                                    "frame, version")
+                                    "frame, version, measured_by")
         rows = self._all(f"SELECT {cols} FROM points WHERE project_id = ? ORDER BY seq", (pid,))
         return [self._point(r) for r in rows]
 
@@ -224,12 +226,13 @@ class SQLiteTransaction(Transaction):
                                (p.project_id,))
         self._insert(
             "INSERT INTO points (project_id, id, seq, code, description, rays, excluded, result,"
-            " error, solved_rev, created_at, updated_at, frame)"
-            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            " error, solved_rev, created_at, updated_at, frame, measured_by)"
+            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (p.project_id, p.id, p.seq, p.code, p.description, _dumps(p.rays),
              _dumps(p.excluded), None if p.result is None else _dumps(p.result),
              p.error, p.solved_rev,
-             p.created_at, p.updated_at, None if p.frame is None else _dumps(p.frame)),
+             p.created_at, p.updated_at, None if p.frame is None else _dumps(p.frame),
+             p.measured_by),
             f"point '{p.id}'",
         )
 
@@ -239,12 +242,12 @@ class SQLiteTransaction(Transaction):
         try:
             cur = self.con.execute(
                 "UPDATE points SET id=?, code=?, description=?, rays=?, excluded=?, result=?,"
-                " error=?, solved_rev=?, updated_at=?, frame=?, version=version+1"
+                " error=?, solved_rev=?, updated_at=?, frame=?, measured_by=?, version=version+1"
                 " WHERE project_id=? AND id=? AND version=?",
                 (p.id, p.code, p.description, _dumps(p.rays), _dumps(p.excluded),
                  None if p.result is None else _dumps(p.result),
                  p.error, p.solved_rev,
-                 p.updated_at, None if p.frame is None else _dumps(p.frame),
+                 p.updated_at, None if p.frame is None else _dumps(p.frame), p.measured_by,
                  *key, p.version),
             )
         except sqlite3.IntegrityError as exc:
@@ -412,6 +415,56 @@ class SQLiteTransaction(Transaction):
 
     def delete_all_check_points(self, pid: str) -> int:
         return self.con.execute("DELETE FROM check_points WHERE project_id = ?", (pid,)).rowcount
+
+    # users ----------------------------------------------------------------------------
+    @staticmethod
+    def _user(r: sqlite3.Row) -> UserRecord:
+        return UserRecord(name=r["name"], role=r["role"], token_hash=r["token_hash"],
+                          created_at=r["created_at"])
+
+    def list_users(self) -> list[UserRecord]:
+        return [self._user(r) for r in self._all("SELECT * FROM users ORDER BY name")]
+
+    def insert_user(self, u: UserRecord) -> None:
+        u.created_at = now_iso()
+        self._insert("INSERT INTO users (name, role, token_hash, created_at) VALUES (?,?,?,?)",
+                     (u.name, u.role, u.token_hash, u.created_at), f"user '{u.name}'")
+
+    def delete_user(self, name: str) -> bool:
+        return self.con.execute("DELETE FROM users WHERE name = ?", (name,)).rowcount > 0
+
+    def user_by_token_hash(self, token_hash: str) -> UserRecord | None:
+        row = self._one("SELECT * FROM users WHERE token_hash = ?", (token_hash,))
+        return None if row is None else self._user(row)
+
+    # the audit trail ------------------------------------------------------------------
+    def append_audit(self, e: AuditEntry) -> None:
+        e.at = now_iso()
+        cur = self.con.execute(
+            "INSERT INTO audit (project_id, at, actor, action, kind, item, before, after)"
+            " VALUES (?,?,?,?,?,?,?,?)",
+            (e.project_id, e.at, e.actor, e.action, e.kind, e.item,
+             None if e.before is None else _dumps(e.before),
+             None if e.after is None else _dumps(e.after)))
+        e.seq = int(cur.lastrowid or 0)
+
+    def list_audit(self, pid: str, item: str | None = None, offset: int = 0,
+                   limit: int | None = None, newest_first: bool = True) -> list[AuditEntry]:
+        cond, args = ("project_id = ?", [pid]) if item is None else \
+            ("project_id = ? AND item = ?", [pid, item])
+        order = "DESC" if newest_first else "ASC"
+        rows = self._all(f"SELECT * FROM audit WHERE {cond} ORDER BY seq {order} LIMIT ? OFFSET ?",
+                         (*args, -1 if limit is None else limit, offset))
+        return [AuditEntry(project_id=r["project_id"], actor=r["actor"], action=r["action"],
+                           kind=r["kind"], item=r["item"], before=_loads(r["before"]),
+                           after=_loads(r["after"]), at=r["at"], seq=r["seq"]) for r in rows]
+
+    def count_audit(self, pid: str, item: str | None = None) -> dict[str, int]:
+        cond, args = ("project_id = ?", (pid,)) if item is None else \
+            ("project_id = ? AND item = ?", (pid, item))
+        rows = self._all(f"SELECT action, COUNT(*) FROM audit WHERE {cond} GROUP BY action"
+                         " ORDER BY action", args)
+        return {r[0]: int(r[1]) for r in rows}
 
 
 class SQLiteStore(Store):
