@@ -5,6 +5,7 @@ the trail pages, filters by item and outlives its project. On SQLite and on Post
 from __future__ import annotations
 
 import pytest
+import test_georef_api
 from fastapi.testclient import TestClient
 from pgcluster import pg_cluster  # noqa: F401  (the session's PostgreSQL cluster)
 from servertools import london_rays
@@ -21,6 +22,10 @@ def store_url(request) -> str | None:
         return None
     cluster = request.getfixturevalue("pg_cluster")
     return cluster.url(cluster.new_database())
+
+
+#: A scene with measured control (DATA, loopback client, project "loc"), as test_georef_api's.
+site = test_georef_api.site
 
 
 def bearer(token: str) -> dict[str, str]:
@@ -158,3 +163,31 @@ def test_the_report_lists_the_latest_changes_and_counts_per_action(tmp_path, mon
     assert "The latest 2 of 5" in latest.caption
     html = render_html(report)
     assert "Audit trail (5)" in html and "&lt;b&gt;mallory" in html and "<b>mallory" not in html
+
+
+def test_georeference_and_undo_are_recorded_with_the_projects_they_re_solve(site):
+    """The scene of test_georef_api's site (loopback: the local operator) and a second
+    project on the same scene: apply and undo are entries of the project that made them; the
+    other project's points, re-solved by them, get a "re-solved" entry each time; a preview
+    and a refused undo leave none."""
+    c, _data, _ = site
+    rays = c.get("/api/projects/loc/points/G0").json()["rays"]
+    assert c.post("/api/projects", json={"name": "o", "id": "other", "scene": "loc",
+                                         "crs": "EPSG:27700"}).status_code == 201
+    assert c.post("/api/projects/other/points", json={"id": "X", "rays": rays}).status_code == 201
+    assert c.post("/api/projects/loc/georeference", json={}).status_code == 200  # a preview
+    assert c.post("/api/projects/loc/georeference", json={"apply": True}).status_code == 200
+    assert c.post("/api/projects/loc/georeference/undo").status_code == 200
+    assert c.post("/api/projects/loc/georeference/undo").status_code == 422
+    loc = c.get("/api/projects/loc/audit", params={"item": "loc"}).json()["entries"]
+    assert [(e["user"], e["action"], e["kind"]) for e in loc] == [
+        ("local", "georeference undone", "scene"), ("local", "georeferenced", "scene")]
+    applied = loc[1]
+    assert applied["before"]["version"] == 0 and applied["after"]["version"] == 1
+    assert applied["after"]["remeasured_points"] == 7 and len(applied["after"][
+        "root_transform"]) == 16
+    assert loc[0]["after"]["version"] == 2
+    other = c.get("/api/projects/other/audit").json()["entries"]
+    assert [(e["action"], e["item"]) for e in other] == [
+        ("re-solved", "loc"), ("re-solved", "loc"), ("created", "X"), ("created", None)]
+    assert other[1]["after"] == {"version": 1, "remeasured_points": 1, "by_project": "loc"}

@@ -801,7 +801,7 @@ class Projects(BuildingService):
                 before = path.read_bytes()
                 out = change(tx, p, path, ctx)
                 written = (path, before)
-                n = self._remeasure_scene(tx, p.scene, ctx)
+                n = self._remeasure_scene(tx, p.scene, ctx, pid)
                 now = scene_frame(self.data_dir, p.scene)
                 audit.record(tx, pid, action, "scene", p.scene,
                              {"version": ctx.version, "root_transform": column_major(ctx.root)},
@@ -814,17 +814,25 @@ class Projects(BuildingService):
             raise
         return out, n
 
-    def _remeasure_scene(self, tx: Transaction, scene: str | None, before: SceneFrame) -> int:
+    def _remeasure_scene(self, tx: Transaction, scene: str | None, before: SceneFrame,
+                         origin: str) -> int:
         """Re-measure every point of every project on ``scene`` in the scene's new frame;
-        points without a recorded frame are pinned to the one ``before`` the change."""
+        points without a recorded frame are pinned to the one ``before`` the change. The
+        projects other than ``origin`` (whose change it is) get a "re-solved" audit entry."""
         ctx = scene_frame(self.data_dir, scene)
         pinned: JSONObject = {"version": before.version,
                               "root_transform": column_major(before.root)}
         n = 0
         for q in tx.list_projects():
             if q.scene == scene:
-                n += self._remeasure_stored(tx, q, ctx, pin=pinned)
+                m = self._remeasure_stored(tx, q, ctx, pin=pinned)
+                n += m
                 tx.update_project(q)  # its scene_version
+                if q.id != origin:
+                    audit.record(tx, q.id, "re-solved", "scene", scene,
+                                 {"version": before.version},
+                                 {"version": q.scene_version, "remeasured_points": m,
+                                  "by_project": origin})
         return n
 
     def follow_scene(self, pid: str) -> bool:
@@ -842,8 +850,12 @@ class Projects(BuildingService):
             ctx = scene_frame(self.data_dir, p.scene)
             if ctx is None or p.scene_version is None or p.scene_version == ctx.version:
                 return False  # another request caught up meanwhile
-            self._remeasure_stored(tx, p, ctx)
+            was = p.scene_version
+            m = self._remeasure_stored(tx, p, ctx)
             tx.update_project(p)
+            audit.record(tx, pid, "re-solved", "scene", p.scene, {"version": was},
+                         {"version": p.scene_version, "remeasured_points": m,
+                          "reason": "the scene's georeference changed outside the store"})
         return True
 
     # check points ---------------------------------------------------------------------
