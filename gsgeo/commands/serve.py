@@ -17,7 +17,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="serve the web viewer, scenes and the JSON API",
         description="Serve the web viewer at /, scenes from DATA/scenes/<name>/ at "
                     "/scenes/<name>/, the JSON API under /api (OpenAPI at /docs). Projects "
-                    "are kept in DATA/gsgeo.sqlite.",
+                    "are kept in DATA/gsgeo.sqlite, or with --store in a PostgreSQL + PostGIS "
+                    "database.",
     )
     p.add_argument("--data", default="gsgeo-data", metavar="DIR",
                    help="data directory with scenes/ and the project store "
