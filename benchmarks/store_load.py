@@ -44,6 +44,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -114,6 +115,34 @@ class PgCluster:
             except (RuntimeError, subprocess.TimeoutExpired):
                 pass
         shutil.rmtree(self.dir, ignore_errors=True)
+
+
+class ThreadWatch:
+    """Counts the threads a process starts while watched (its /proc task ids, sampled every
+    10 ms): a request on a fresh thread rebuilds that thread's PROJ objects."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self.before = self.tids()
+        self.seen: set[str] = set()
+        self.done = threading.Event()
+        self.thread = threading.Thread(target=self.watch, daemon=True)
+        self.thread.start()
+
+    def tids(self) -> set[str]:
+        try:
+            return set(os.listdir(f"/proc/{self.pid}/task"))
+        except OSError:
+            return set()
+
+    def watch(self) -> None:
+        while not self.done.wait(0.01):
+            self.seen |= self.tids()
+
+    def stop(self) -> int:
+        self.done.set()
+        self.thread.join()
+        return len(self.seen - self.before)
 
 
 def http_request(port: int, path: str, doc: dict) -> bytes:
@@ -281,8 +310,13 @@ def bench_backend(backend: str, args: argparse.Namespace) -> dict:
                       file=sys.stderr)
                 cpu0 = cpu_seconds(gs.pid)
                 db0 = cpu_seconds(db_pid) if db_pid else 0.0
-                res = load_run(port, make_for(name), ok, clients, n, think, seed=1,
-                               procs=args.client_procs)
+                seen = ThreadWatch(gs.pid)
+                try:
+                    res = load_run(port, make_for(name), ok, clients, n, think, seed=1,
+                                   procs=args.client_procs)
+                finally:
+                    res_threads = seen.stop()
+                res["server_threads_started"] = res_threads
                 total = res["requests"] + clients  # warm-ups cost server CPU too
                 res["server_cpu_ms_per_request"] = (cpu_seconds(gs.pid) - cpu0) * 1000 / total
                 if db_pid:
@@ -294,7 +328,8 @@ def bench_backend(backend: str, args: argparse.Namespace) -> dict:
                 print(f"  p50 {res['p50_ms']:.1f}  p95 {res['p95_ms']:.1f}  p99 "
                       f"{res['p99_ms']:.1f}  max {res['max_ms']:.1f} ms  "
                       f"{res['req_per_s']:.0f} req/s  errors {res['errors']}  server CPU "
-                      f"{res['server_cpu_ms_per_request']:.1f} ms/req{db}", file=sys.stderr)
+                      f"{res['server_cpu_ms_per_request']:.1f} ms/req{db}  server threads "
+                      f"started {res_threads}", file=sys.stderr)
         r = httpx.get(f"{base}/api/projects/{PROJECT}", timeout=30)
         out["points_stored"] = r.json().get("counts", {}).get("points")
     finally:
