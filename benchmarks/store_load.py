@@ -348,7 +348,8 @@ def bench_backend(backend: str, args: argparse.Namespace) -> dict:
 def inprocess_profile(backend: str, url: str | None, n: int) -> dict:
     """``n`` stored points through the service in this process (no HTTP, one thread): wall
     ms per point unprofiled, then under cProfile the share of the time spent waiting in the
-    database driver's execute/commit calls (round trips, locks, WAL flush)."""
+    database driver's execute/commit calls (round trips, locks, WAL flush); last, 20 points
+    each stored on a new thread."""
     import cProfile
     import pstats
 
@@ -384,10 +385,21 @@ def inprocess_profile(backend: str, url: str | None, n: int) -> dict:
                                 "<method 'commit' of 'sqlite3.Connection' objects>")):
                 db += ct
                 calls += nc
+        fresh: list[float] = []
+        for i in range(20):  # one stored point on a new thread (its PROJ objects cold)
+            def one(k: int = i) -> None:
+                t = time.perf_counter()
+                svc.add_point("inproc", {"id": f"f{k}", "rays": rays[k % 64]})
+                fresh.append((time.perf_counter() - t) * 1000)
+            th = threading.Thread(target=one)
+            th.start()
+            th.join()
         svc.store.close()
         return {"backend": backend, "points": n, "wall_ms_per_point": wall,
                 "profiled_ms_per_point": profiled, "db_wait_ms_per_point": db * 1000 / n,
-                "db_calls_per_point": calls / n}
+                "db_calls_per_point": calls / n,
+                "fresh_thread_ms_median": float(np.median(fresh)),
+                "fresh_thread_ms_max": max(fresh)}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -431,7 +443,9 @@ def main() -> int:
                 print(f"{backend}: {r['wall_ms_per_point']:.2f} ms/point; profiled "
                       f"{r['profiled_ms_per_point']:.2f} ms/point of which in the driver's "
                       f"execute/commit {r['db_wait_ms_per_point']:.2f} ms "
-                      f"({r['db_calls_per_point']:.1f} calls/point)")
+                      f"({r['db_calls_per_point']:.1f} calls/point); on a fresh thread "
+                      f"{r['fresh_thread_ms_median']:.1f} ms (median of 20, max "
+                      f"{r['fresh_thread_ms_max']:.1f})")
         finally:
             if cluster is not None:
                 cluster.stop()
