@@ -124,7 +124,7 @@ class ThreadWatch:
     def __init__(self, pid: int) -> None:
         self.pid = pid
         self.before = self.tids()
-        self.seen: set[str] = set()
+        self.first_seen: dict[str, float] = {}  # task id -> time.perf_counter()
         self.done = threading.Event()
         self.thread = threading.Thread(target=self.watch, daemon=True)
         self.thread.start()
@@ -137,12 +137,15 @@ class ThreadWatch:
 
     def watch(self) -> None:
         while not self.done.wait(0.01):
-            self.seen |= self.tids()
+            now = time.perf_counter()
+            for tid in self.tids() - self.before:
+                self.first_seen.setdefault(tid, now)
 
-    def stop(self) -> int:
+    def stop(self, after: float) -> tuple[int, int]:
+        """(threads started in all, of which after ``after``: during the timed requests)."""
         self.done.set()
         self.thread.join()
-        return len(self.seen - self.before)
+        return len(self.first_seen), sum(t >= after for t in self.first_seen.values())
 
 
 def http_request(port: int, path: str, doc: dict) -> bytes:
@@ -242,7 +245,7 @@ def load_run(port: int, make: Callable[[int, int], bytes], ok: int, clients: int
     return {"requests": int(a.size), "errors": sum(p[2] for p in parts),
             "p50_ms": float(np.percentile(a, 50)), "p95_ms": float(np.percentile(a, 95)),
             "p99_ms": float(np.percentile(a, 99)), "max_ms": float(a.max()),
-            "req_per_s": a.size / wall,
+            "req_per_s": a.size / wall, "start_at": start_at,
             "client_cpu_ms_per_request": sum(p[5] for p in parts) * 1000 / a.size}
 
 
@@ -314,9 +317,13 @@ def bench_backend(backend: str, args: argparse.Namespace) -> dict:
                 try:
                     res = load_run(port, make_for(name), ok, clients, n, think, seed=1,
                                    procs=args.client_procs)
-                finally:
-                    res_threads = seen.stop()
-                res["server_threads_started"] = res_threads
+                except BaseException:
+                    seen.stop(after=0.0)
+                    raise
+                started, timed = seen.stop(after=res["start_at"])
+                res["server_threads_started"] = started
+                res["server_threads_started_timed"] = timed
+                res_threads = f"{started} ({timed} during the timed requests)"
                 total = res["requests"] + clients  # warm-ups cost server CPU too
                 res["server_cpu_ms_per_request"] = (cpu_seconds(gs.pid) - cpu0) * 1000 / total
                 if db_pid:
