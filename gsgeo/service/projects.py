@@ -405,24 +405,43 @@ class Projects(BuildingService):
         code = _text(new.code, "code", 200)
         description = _text(new.description, "description")
         excluded = check_excluded(list(new.excluded), len(new.rays))
-        with self.store.transaction() as tx:
+        point_id = None if new.id is None else item_id(new.id, "id")
+        # Solved before the write transaction, so that writers (one at a time, on every
+        # backend) do not wait for each other's solves; measured again inside it only when
+        # the project's settings or its scene's frame changed meanwhile.
+        with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
-            if new.id is None:
-                point_id = self._next_id(tx.point_ids(pid))
+            if point_id is not None:
+                self._check_new_point_id(tx, pid, point_id)
+        ctx = scene_frame(self.data_dir, p.scene)
+        pt = PointRecord(project_id=pid, id=point_id or "", rays=new.rays.to_json(), code=code,
+                         description=description, excluded=excluded,
+                         frame=frame_record(ctx, new.georef_version),
+                         measured_by=audit.current_actor())
+        self._measure_into(pt, p, strict=True, rays=new.rays, ctx=ctx)
+        with self.store.transaction() as tx:
+            now = self._project(tx, pid)
+            ctx_now = scene_frame(self.data_dir, now.scene)
+            if (now.scene, now.settings_rev, None if ctx_now is None else ctx_now.version) != \
+                    (p.scene, p.settings_rev, None if ctx is None else ctx.version):
+                pt.frame = frame_record(ctx_now, new.georef_version)
+                self._measure_into(pt, now, strict=True, rays=new.rays, ctx=ctx_now)
+            if point_id is None:
+                pt.id = self._next_id(tx.point_ids(pid))
+                if pt.result is not None:  # always, once measured strictly
+                    pt.result["point_id"] = pt.id
+                    pt.record = with_record(pt.result)
             else:
-                point_id = item_id(new.id, "id")
-                if tx.get_point(pid, point_id) is not None:
-                    raise ConflictError(f"point '{point_id}' already exists in project '{pid}'",
-                                        field="id")
-            ctx = scene_frame(self.data_dir, p.scene)
-            pt = PointRecord(project_id=pid, id=point_id, rays=new.rays.to_json(), code=code,
-                             description=description, excluded=excluded,
-                             frame=frame_record(ctx, new.georef_version),
-                             measured_by=audit.current_actor())
-            self._measure_into(pt, p, strict=True, rays=new.rays, ctx=ctx)
+                self._check_new_point_id(tx, pid, point_id)
             tx.insert_point(pt)
             audit.record(tx, pid, "created", "point", pt.id, None, audit.point_values(pt))
             return pt
+
+    @staticmethod
+    def _check_new_point_id(tx: Transaction, pid: str, point_id: str) -> None:
+        if tx.get_point(pid, point_id) is not None:
+            raise ConflictError(f"point '{point_id}' already exists in project '{pid}'",
+                                field="id")
 
     @staticmethod
     def _next_id(existing: list[str]) -> str:
