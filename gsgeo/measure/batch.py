@@ -33,7 +33,7 @@ time for the batch).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -713,6 +713,25 @@ def _finish_json(points: Sequence[BatchPoint], s: _Solved, source: str, point_ec
         results[i] = rec
 
 
+@dataclass
+class _CallValues:
+    """One to_grid_many call's units (their indices) and rows, with the values every grid
+    point of it needs: covariances (k, 3, 3) m², sigmas, the 95 % ellipse as lists, the 95 %
+    ellipsoid's axes (k, 3, 3) and the measurement-only sigmas (k, 3) or None."""
+
+    gp: GridPoints
+    units: list[int]
+    rows: np.ndarray
+    cov: FloatArray
+    sigmas: list[list[float]]
+    major: list[float]
+    minor: list[float]
+    bearing: list[float]
+    axes: FloatArray
+    meas: FloatArray | None
+    warnings: list[str]
+
+
 class _GridCalls:
     """Units (runs of rows) transformed by to_grid_many: which call and where each unit is."""
 
@@ -725,6 +744,26 @@ class _GridCalls:
         self.offset = np.zeros(u, dtype=np.int64)  # the unit's first row in its call
         self.errors: dict[int, GsgeoError] = {}
 
+    def _calls(self, frame_cov: FloatArray | None) -> Iterator[_CallValues]:
+        """Each successful call's units and their grid values (sigmas, 95 % ellipse and
+        ellipsoid, the measurement-only sigmas when a frame covariance was added)."""
+        for c, gp in enumerate(self.calls):
+            units = np.flatnonzero(self.call == c)
+            rows = self.offset[units]
+            assert gp.covariance is not None  # the points' call carries covariances
+            cov = gp.covariance[rows]
+            meas = None
+            if frame_cov is not None:
+                j = gp.jacobian[rows]
+                mc = cov - j @ frame_cov[units] @ np.swapaxes(j, 1, 2)
+                meas = np.sqrt(np.clip(np.einsum("mii->mi", mc), 0.0, None))
+            major, minor, bearing = (a.tolist() for a in ellipse_95(cov[:, :2, :2]))
+            yield _CallValues(
+                gp=gp, units=units.tolist(), rows=rows, cov=cov,
+                sigmas=np.sqrt(np.maximum(np.einsum("mii->mi", cov), 0.0)).tolist(),
+                major=major, minor=minor, bearing=bearing, axes=ellipsoid_axes_95(cov),
+                meas=meas, warnings=self.warnings[c])
+
     def grid_points(self, frame_cov: FloatArray | None
                     ) -> tuple[list[GridPoint | GsgeoError | None], list[FloatArray | None]]:
         """Per one-row unit: its GridPoint (GridPoint.build's values) or its error, and the
@@ -734,33 +773,23 @@ class _GridCalls:
         sig_meas: list[FloatArray | None] = [None] * u
         for u_i, exc in self.errors.items():
             out[u_i] = exc
-        for c, gp in enumerate(self.calls):
-            units = np.flatnonzero(self.call == c)
-            rows = self.offset[units]
-            assert gp.covariance is not None  # the points' call carries covariances
-            cov = gp.covariance[rows]
-            sig = np.sqrt(np.maximum(np.einsum("mii->mi", cov), 0.0)).tolist()
-            major, minor, bearing = (a.tolist() for a in ellipse_95(cov[:, :2, :2]))
-            axes = ellipsoid_axes_95(cov)
-            if frame_cov is not None:
-                j = gp.jacobian[rows]
-                meas = cov - j @ frame_cov[units] @ np.swapaxes(j, 1, 2)
-                sm = np.sqrt(np.clip(np.einsum("mii->mi", meas), 0.0, None))
-                for k, u_i in enumerate(units.tolist()):
-                    sig_meas[u_i] = sm[k]
+        for v in self._calls(frame_cov):
+            gp, rows, sig = v.gp, v.rows, v.sigmas
             e, n, h = gp.easting[rows].tolist(), gp.northing[rows].tolist(), gp.height[rows].tolist()
             lon, lat = gp.lon[rows].tolist(), gp.lat[rows].tolist()
             hw, he = gp.h_wgs84[rows].tolist(), gp.h_ellipsoidal[rows].tolist()
-            for k, u_i in enumerate(units.tolist()):
+            for k, u_i in enumerate(v.units):
+                if v.meas is not None:
+                    sig_meas[u_i] = v.meas[k]
                 out[u_i] = GridPoint(
-                    easting=e[k], northing=n[k], height=h[k], covariance=cov[k], crs=gp.crs,
+                    easting=e[k], northing=n[k], height=h[k], covariance=v.cov[k], crs=gp.crs,
                     height_type=gp.height_type, vertical_datum=gp.vertical_datum,
                     operation=gp.operation, operation_accuracy_m=gp.operation_accuracy_m,
                     lon=lon[k], lat=lat[k], h_wgs84=hw[k], h_ellipsoidal=he[k],
                     sigma_e=sig[k][0], sigma_n=sig[k][1], sigma_h=sig[k][2],
-                    ellipse_major_95=major[k], ellipse_minor_95=minor[k],
-                    ellipse_bearing_deg=bearing[k], ellipsoid_axes_95=axes[k],
-                    warnings=list(self.warnings[c]))
+                    ellipse_major_95=v.major[k], ellipse_minor_95=v.minor[k],
+                    ellipse_bearing_deg=v.bearing[k], ellipsoid_axes_95=v.axes[k],
+                    warnings=list(v.warnings))
         return out, sig_meas
 
     def grid_rows(self, frame_cov: FloatArray | None) -> list[GridRow | GsgeoError | None]:
@@ -769,28 +798,18 @@ class _GridCalls:
         out: list[GridRow | GsgeoError | None] = [None] * self.call.shape[0]
         for u_i, exc in self.errors.items():
             out[u_i] = exc
-        for c, gp in enumerate(self.calls):
-            units = np.flatnonzero(self.call == c)
-            rows = self.offset[units]
-            assert gp.covariance is not None  # the points' call carries covariances
-            cov = gp.covariance[rows]
-            sig = np.sqrt(np.maximum(np.einsum("mii->mi", cov), 0.0)).tolist()
-            major, minor, bearing = (a.tolist() for a in ellipse_95(cov[:, :2, :2]))
-            axes = ellipsoid_axes_95(cov).tolist()
-            meas: list[list[float]] | list[None] = [None] * units.shape[0]
-            if frame_cov is not None:
-                j = gp.jacobian[rows]
-                mc = cov - j @ frame_cov[units] @ np.swapaxes(j, 1, 2)
-                meas = np.sqrt(np.clip(np.einsum("mii->mi", mc), 0.0, None)).tolist()
+        for v in self._calls(frame_cov):
+            gp, rows = v.gp, v.rows
             e, n, h = gp.easting[rows].tolist(), gp.northing[rows].tolist(), gp.height[rows].tolist()
             lon, lat, hw = gp.lon[rows].tolist(), gp.lat[rows].tolist(), gp.h_wgs84[rows].tolist()
-            covs = cov.tolist()
+            axes, covs = v.axes.tolist(), v.cov.tolist()
+            meas = [None] * len(v.units) if v.meas is None else v.meas.tolist()
             const = (gp.crs, gp.height_type, gp.vertical_datum, gp.operation,
                      gp.operation_accuracy_m)
-            for k, u_i in enumerate(units.tolist()):
-                out[u_i] = (const, e[k], n[k], h[k], sig[k], major[k], minor[k], bearing[k],
-                            axes[k], covs[k], lon[k], lat[k], hw[k], meas[k],
-                            list(self.warnings[c]))
+            for k, u_i in enumerate(v.units):
+                out[u_i] = (const, e[k], n[k], h[k], v.sigmas[k], v.major[k], v.minor[k],
+                            v.bearing[k], axes[k], covs[k], lon[k], lat[k], hw[k], meas[k],
+                            list(v.warnings))
         return out
 
     def row_blocks(self) -> list[FloatArray | None]:
