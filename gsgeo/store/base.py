@@ -16,12 +16,12 @@ point it writes, unchecked (a re-measure writes derived state of points it has j
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from datetime import datetime
 
-from gsgeo.jsontypes import JSONObject
+from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.store.accountrecords import AuditEntry, UserRecord
 from gsgeo.store.records import (
     BuildingRecord,
@@ -80,6 +80,27 @@ class PointRow:
     id: str
     record: JSONObject
     updated_at: str
+
+
+def result_rows(points: Iterable[PointRecord], now: str, dumps: Callable[[JSON], str]
+                ) -> Iterator[tuple[object, ...]]:
+    """What ``Transaction.update_results`` writes, one point at a time as ``points`` come
+    (a backend's executemany pulls them): (result, error, solved_rev, frame, updated_at,
+    project_id, id), texts made with ``dumps``. Each record's ``updated_at`` becomes ``now``
+    and its ``version`` goes up by one (a new result is a new version of the point); a
+    frame record shared by many points is encoded once."""
+    frames: dict[int, tuple[JSON, str]] = {}  # id(frame) -> (frame, its text)
+    for p in points:
+        p.updated_at = now
+        p.version += 1
+        frame = None
+        if p.frame is not None:
+            got = frames.get(id(p.frame))
+            if got is None or got[0] is not p.frame:
+                got = frames[id(p.frame)] = (p.frame, dumps(p.frame))
+            frame = got[1]
+        yield (None if p.result is None else dumps(p.result), p.error, p.solved_rev, frame,
+               now, p.project_id, p.id)
 
 
 class Transaction(ABC):

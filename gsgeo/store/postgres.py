@@ -32,7 +32,7 @@ from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSON
 from gsgeo.pointschema import RECORD_KEYS
 from gsgeo.store.accountrecords import AuditEntry, UserRecord
-from gsgeo.store.base import PointFilter, PointRow, Store, Transaction
+from gsgeo.store.base import PointFilter, PointRow, Store, Transaction, result_rows
 from gsgeo.store.pgmigrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.pgviews import create_views, drop_views
 from gsgeo.store.records import (
@@ -330,27 +330,11 @@ class PostgresTransaction(Transaction):
         p.version += 1
 
     def update_results(self, points: Iterable[PointRecord]) -> None:
-        now = now_iso()
-        frames: dict[int, tuple[JSON, str]] = {}  # id(frame) -> (frame, its text): most share one
-
-        def frame_text(frame: JSON) -> str:
-            got = frames.get(id(frame))
-            if got is None or got[0] is not frame:
-                got = frames[id(frame)] = (frame, json_text(frame))
-            return got[1]
-
-        def rows() -> Iterator[tuple[object, ...]]:  # one at a time, as executemany asks
-            for p in points:
-                p.updated_at = now
-                p.version += 1  # a new result is a new version of the point
-                yield nul_free((None if p.result is None else json_text(p.result), p.error,
-                                p.solved_rev, None if p.frame is None else frame_text(p.frame),
-                                now, p.project_id, p.id))
-
         with self.con.cursor() as cur:
             cur.executemany(
                 b"UPDATE points SET result=%s, error=%s, solved_rev=%s, frame=%s, updated_at=%s,"
-                b" version=version+1 WHERE project_id=%s AND id=%s", rows())
+                b" version=version+1 WHERE project_id=%s AND id=%s",
+                (nul_free(row) for row in result_rows(points, now_iso(), json_text)))
 
     def delete_point(self, pid: str, point_id: str) -> bool:
         return self._count("DELETE FROM points WHERE project_id = %s AND id = %s",

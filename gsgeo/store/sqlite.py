@@ -22,7 +22,7 @@ from gsgeo.errors import GsgeoError
 from gsgeo.jsontypes import JSON
 from gsgeo.pointschema import RECORD_KEYS
 from gsgeo.store.accountrecords import AuditEntry, UserRecord
-from gsgeo.store.base import PointFilter, PointRow, Store, Transaction
+from gsgeo.store.base import PointFilter, PointRow, Store, Transaction, result_rows
 from gsgeo.store.migrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.records import (
     BuildingRecord,
@@ -259,26 +259,10 @@ class SQLiteTransaction(Transaction):
         p.version += 1
 
     def update_results(self, points: Iterable[PointRecord]) -> None:
-        now = now_iso()
-        frames: dict[int, tuple[JSON, str]] = {}  # id(frame) -> (frame, its text): most share one
-
-        def frame_text(frame: JSON) -> str:
-            got = frames.get(id(frame))
-            if got is None or got[0] is not frame:
-                got = frames[id(frame)] = (frame, _dumps(frame))
-            return got[1]
-
-        def rows() -> Iterator[tuple[object, ...]]:  # one at a time, as executemany asks
-            for p in points:
-                p.updated_at = now
-                p.version += 1  # a new result is a new version of the point
-                yield (None if p.result is None else _dumps(p.result), p.error, p.solved_rev,
-                       None if p.frame is None else frame_text(p.frame), now, p.project_id,
-                       p.id)
-
         self.con.executemany(
             "UPDATE points SET result=?, error=?, solved_rev=?, frame=?, updated_at=?,"
-            " version=version+1 WHERE project_id=? AND id=?", rows())
+            " version=version+1 WHERE project_id=? AND id=?",
+            result_rows(points, now_iso(), _dumps))
 
     def delete_point(self, pid: str, point_id: str) -> bool:
         cur = self.con.execute("DELETE FROM points WHERE project_id = ? AND id = ?", (pid, point_id))
