@@ -330,15 +330,22 @@ def analytic_jacobian(points_ecef: ArrayLike, crs: str, source_crs: str = "EPSG:
     return jac
 
 
+def datum_text(src: SourceCRS) -> str:
+    """The source's geographic 3-D CRS as "WGS 84 (EPSG:4979)": its name and id, and its
+    ellipsoid only where the name does not already say it ("ETRS89 (EPSG:4937, ellipsoid
+    GRS 1980)")."""
+    crs = src.geographic_3d
+    ell = crs.ellipsoid.name if crs.ellipsoid else None
+    extra = f", ellipsoid {ell}" if ell and ell.casefold() not in crs.name.casefold() else ""
+    return f"{crs.name} ({src.geographic_3d_id}{extra})"
+
+
 def _heights(src: SourceCRS, g: GridCRS, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
              geoid: str | Path | None, crs_text: str
              ) -> tuple[np.ndarray, str, str, np.ndarray | None, str | None, float | None]:
     """(height, height_type, vertical_datum, extra variance, vertical op, its accuracy)."""
-    ell_name = src.geographic_3d.ellipsoid.name if src.geographic_3d.ellipsoid else "?"
     if g.vertical is None and geoid is None:
-        label = (f"ellipsoidal height on {src.geographic_3d.name} "
-                 f"({src.geographic_3d_id}, ellipsoid {ell_name})")
-        return h, "ellipsoidal", label, None, None, None
+        return h, "ellipsoidal", f"ellipsoidal height on {datum_text(src)}", None, None, None
     if geoid is not None:
         grid = load_geoid(geoid)
         x, y = lon, lat
@@ -347,7 +354,7 @@ def _heights(src: SourceCRS, g: GridCRS, lon: np.ndarray, lat: np.ndarray, h: np
             x, y = transform_xy(t, lon, lat)
         und, sig = grid.sample(x, y)
         stated = grid.sigma is not None or grid.sigma_const is not None
-        label = (f"{grid.label} (H = h - N, h on {src.geographic_3d.name} ellipsoid {ell_name}"
+        label = (f"{grid.label} (H = h - N, h on {datum_text(src)}"
                  f"{'' if stated else '; no stated uncertainty'})")
         return h - und, "orthometric", label, sig**2, None, None
     # A vertical CRS through PROJ: refuse the ballpark H = h.
