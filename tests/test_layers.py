@@ -73,7 +73,7 @@ def offenders(source: str, forbidden: tuple[str, ...], allowed: tuple[str, ...] 
 
 LAYERS = ("gsgeo.solve", "gsgeo.crs", "gsgeo.measure", "gsgeo.session", "gsgeo.export",
           "gsgeo.buildings",
-          "gsgeo.georef", "gsgeo.report", "gsgeo.tiles", "gsgeo.store", "gsgeo.service",
+          "gsgeo.georef", "gsgeo.report", "gsgeo.tiles", "gsgeo.aim", "gsgeo.store", "gsgeo.service",
           "gsgeo.server", "gsgeo.commands", "gsgeo.demo", "gsgeo.cli")
 
 
@@ -115,6 +115,14 @@ def test_buildings_sit_beside_export_and_use_only_the_maths_below():
                                          "gsgeo.tiles", "gsgeo.server", "gsgeo.service",
                                          "gsgeo.commands", "gsgeo.demo", "gsgeo.cli",
                                          "gsgeo.georef", "gsgeo.report")) == []
+
+
+def test_aim_sits_beside_tiles_and_uses_only_what_is_below():
+    """gsgeo.aim (depth hints, views, matching) reads splats through gsgeo.tiles, never above."""
+    assert offenders("gsgeo.aim", ("gsgeo.session", "gsgeo.store", "gsgeo.export",
+                                   "gsgeo.server", "gsgeo.service", "gsgeo.commands",
+                                   "gsgeo.demo", "gsgeo.cli", "gsgeo.georef", "gsgeo.report",
+                                   "gsgeo.buildings")) == []
 
 
 def test_the_server_reaches_the_store_only_through_the_service():

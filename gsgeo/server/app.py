@@ -210,6 +210,9 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     from gsgeo.server.ogc import router as ogc_router
 
     app.include_router(ogc_router)
+    from gsgeo.server.aim import router as aim_router
+
+    app.include_router(aim_router)
 
     scene_folders = SceneFolders(config.data_dir)
     app.state.scene_hosts = hosts

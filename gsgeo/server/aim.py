@@ -1,0 +1,71 @@
+"""Routes of the aiming aids (gsgeo.service.aiming): depth hint, suggested views, matching.
+
+POST /api/scenes/{scene}/depth, POST /api/scenes/{scene}/views and POST /api/match. The
+scene routes read the scene's splats, so they need its tiles on this server: 404 for an
+unknown scene, 409 when its tiles are served from a static host.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Request
+from pydantic import BaseModel, ConfigDict, Field
+
+from gsgeo.errors import InputError
+from gsgeo.measure import Rays as RayArrays
+from gsgeo.server.api import ErrorBody
+from gsgeo.server.models import Ray, rays_of
+from gsgeo.server.scenes import SceneFolders
+from gsgeo.service import ConflictError, NotFoundError
+from gsgeo.service.aiming import depth_on_ray
+
+router = APIRouter(prefix="/api", tags=["aiming"], responses={
+    404: {"model": ErrorBody, "description": "no such scene"},
+    409: {"model": ErrorBody, "description": "the scene's tiles are on a static host, not here"},
+    413: {"model": ErrorBody, "description": "request body over the size limit"},
+    422: {"model": ErrorBody, "description": "malformed request; message names the field"},
+})
+
+SceneName = Annotated[str, Field(max_length=64, description="scene name in DATA/scenes/")]
+
+
+class DepthRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    ray: Ray
+
+
+class DepthAnswer(BaseModel):
+    hit: bool
+    depth_m: float | None = Field(description="along the ray from its origin, metres")
+    point_ecef: list[float] | None = Field(description="rendered ECEF, metres")
+    near_m: float | None
+    far_m: float | None
+    n_splats: int
+    reason: str | None
+
+
+def scene_folder(request: Request, scene: str) -> Path:
+    """The folder of a scene whose tiles this server holds; NotFoundError / ConflictError."""
+    folder = SceneFolders(request.app.state.config.data_dir).folder(scene)
+    if folder is None or not (folder / "tileset.json").is_file():
+        raise NotFoundError(f"no such scene: {scene!r}")
+    if request.app.state.scene_hosts.folder(scene) is not None:
+        raise ConflictError(f"the tiles of scene {scene!r} are on a static host, not on this "
+                            "server: its splats cannot be read here", field="scene")
+    return folder
+
+
+def one_ray(ray: Ray, field: str = "ray") -> RayArrays:
+    """The typed ray of a request's single ray; InputError names ``ray.<member>``."""
+    try:
+        return rays_of([ray])
+    except InputError as exc:
+        raise exc.at((exc.field or "").replace("rays[0]", field, 1) or field) from None
+
+
+@router.post("/scenes/{scene}/depth", response_model=DepthAnswer,
+             summary="Depth hint and near/far bounds of the splats along a ray")
+def depth(scene: SceneName, body: DepthRequest, request: Request) -> dict[str, Any]:
+    return depth_on_ray(scene_folder(request, scene), one_ray(body.ray))
