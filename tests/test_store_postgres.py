@@ -58,7 +58,8 @@ def test_each_project_has_typed_postgis_views_in_its_grid_srid_with_z(cluster, d
     svc.add_feature(p.id, "polygon", {"id": "G", "points": ["P0", "P1", "P2", "P3"]})
 
     cols = geometry_columns(cluster, db)
-    assert cols == {"gsgeo_site_a_lines": ("geom", "LINESTRING", 27700, 3),
+    assert cols == {"gsgeo_site_a_buildings": ("geom", "POLYGON", 27700, 3),
+                    "gsgeo_site_a_lines": ("geom", "LINESTRING", 27700, 3),
                     "gsgeo_site_a_points": ("geom", "POINT", 27700, 3),
                     "gsgeo_site_a_polygons": ("geom", "POLYGON", 27700, 3)}
     rows = cluster.sql(db, "SELECT point_id, code, crs, n_rays, easting, northing, height,"
@@ -94,7 +95,7 @@ def test_view_names_keep_projects_apart(cluster, db, store):
         for pid in ("a-b", "a_b", "A-B"):
             tx.insert_project(Project(id=pid, name=pid, crs="EPSG:27700+5701"))
     names = set(geometry_columns(cluster, db))
-    assert len(names) == 9 and "gsgeo_a_b_points" in names
+    assert len(names) == 12 and "gsgeo_a_b_points" in names
     assert all(len(n) <= 63 and n == n.lower() for n in names)
     assert {v[2] for v in geometry_columns(cluster, db).values()} == {27700}
 

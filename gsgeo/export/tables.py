@@ -34,6 +34,7 @@ from gsgeo.measure.features import (
     polygon_measures_many,
 )
 from gsgeo.measure.schema import RECORD_KEYS
+from gsgeo.pointschema import BUILDING_MEASURES, BUILDING_TYPES
 
 #: Column types of the point schema (the README's "Point schema"): 'str', 'float' or 'int'.
 POINT_TYPES: dict[str, str] = {k: "float" for k in RECORD_KEYS}
@@ -54,15 +55,6 @@ POLYGON_TYPES: dict[str, str] = {"polygon_id": "str", "point_ids": "str", "n_poi
                                  "perimeter_2d": "float", "sigma_perimeter_2d": "float"}
 ELLIPSE_TYPES: dict[str, str] = {"point_id": "str", "ellipse_major_95": "float",
                                  "ellipse_minor_95": "float", "ellipse_bearing_deg": "float"}
-#: The buildings layer: one row per surface of a building's LoD2 solid (its semantic type and
-#: the building's measures: m^3, m^2, heights H in the CRS's vertical units, sigmas 1 sigma).
-BUILDING_MEASURES: tuple[str, ...] = (
-    "volume", "sigma_volume", "footprint_area", "sigma_footprint_area", "ground_height",
-    "sigma_ground_height", "eaves_height", "sigma_eaves_height", "ridge_height",
-    "sigma_ridge_height", "measured_height", "sigma_measured_height")
-BUILDING_TYPES: dict[str, str] = {"building_id": "str", "surface_index": "int",
-                                  "surface_type": "str", "roof_type": "str",
-                                  **dict.fromkeys(BUILDING_MEASURES, "float")}
 CHECK_POINT_TYPES: dict[str, str] = {"point_id": "str", "easting": "float", "northing": "float",
                                      "height": "float", "measured": "bool",
                                      "d_easting": "float", "d_northing": "float",

@@ -30,6 +30,7 @@ import orjson
 from gsgeo.buildings.model import BuildingModel, build_building
 from gsgeo.buildings.spec import BuildingSpec, building_to_json, parse_building, point_ids
 from gsgeo.errors import CRSError, GsgeoError, InputError
+from gsgeo.export.tables import building_table
 from gsgeo.georef.control import grid_to_ecef
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.service import audit
@@ -43,6 +44,7 @@ from gsgeo.store.records import (
     Project,
     require_version,
 )
+from gsgeo.store.surfaces import BuildingSurface
 
 #: Directory of DTM GeoTIFFs inside the data directory.
 DTM_DIR = "dtm"
@@ -168,6 +170,24 @@ class BuildingResult:
     error: str | None = None
 
 
+def building_surfaces(model: BuildingModel) -> list[BuildingSurface]:
+    """The surfaces of a built building as a store keeps them for GIS: the rows of the
+    exports' buildings layer (gsgeo.export.tables.building_table, the columns of
+    gsgeo.pointschema.BUILDING_TYPES) with their rings (E, N, H in the grid CRS)."""
+    got = building_table([model])
+    if got is None:
+        return []
+    table, rings = got
+    out = []
+    for i, ring in enumerate(rings):
+        values = json_ready({k: col[i] for k, col in table.columns.items()})
+        if not isinstance(values, dict):
+            continue  # (json_ready keeps a dict a dict)
+        out.append(BuildingSurface(str(values["building_id"]), i, values,
+                                   [(float(x), float(y), float(z)) for x, y, z in ring]))
+    return out
+
+
 def building_json(r: BuildingResult, project: Project, data_dir: Path | None) -> JSONObject:
     """The API's answer: BuildingModel.to_dict() plus ``vertices_ecef`` (ECEF metres of the
     project's source CRS, in the order of ``vertices``), ``error`` (None when built) and the
@@ -263,6 +283,24 @@ class BuildingService:
             return BuildingResult(b, None, str(exc))
         return BuildingResult(b, model)
 
+    def keep_surfaces(self, tx: Transaction, p: Project, only: BuildingResult | None = None,
+                      *, using: str | None = None) -> None:
+        """Rewrite the surfaces the store keeps for GIS (gsgeo.store.base.Transaction.
+        set_building_surfaces) of project ``p``'s buildings as they build now, inside ``tx``:
+        ``only`` one just built, or those that use point ``using``, or all of them. Called in
+        the transaction of every change that can move a building; nothing where the store
+        keeps no surfaces."""
+        if not tx.keeps_building_surfaces():
+            return
+        if only is not None:
+            results = [only]
+        else:
+            results = [self.built_in(tx, p, b) for b in tx.list_buildings(p.id)
+                       if using is None or using in spec_point_ids(b.spec)]
+        for r in results:
+            tx.set_building_surfaces(p.id, r.record.id,
+                                     [] if r.model is None else building_surfaces(r.model))
+
     def building_results(self, pid: str) -> tuple[Project, list[BuildingResult]]:
         """The project and each of its buildings with its model now (or its error)."""
         self.follow_scene(pid)
@@ -341,6 +379,7 @@ class BuildingService:
         b = BuildingRecord(project_id=p.id, id=spec["id"], spec=spec)
         r = self.built_in(tx, p, b, strict=True)
         tx.insert_building(b)
+        self.keep_surfaces(tx, p, r)
         return r
 
     def update_building(self, pid: str, bid: str, changes: JSONObject,
@@ -365,6 +404,7 @@ class BuildingService:
                                     field="id")
             r = self.built_in(tx, p, b, strict=True)
             tx.update_building(b, old_id=old)
+            self.keep_surfaces(tx, p, r)
             before, after = audit.changed(was, audit.building_values(b))
             audit.record(tx, pid, "changed", "building", old, before, after)
         return building_json(r, p, self.data_dir)

@@ -291,6 +291,7 @@ class Projects(BuildingService):
             # freed while the collector is still held: otherwise the objects the results are
             # made of, still alive when it resumes, start a full collection
             del pts
+        self.keep_surfaces(tx, p)  # every building may have moved with its points
         p.scene_version = None if ctx is None else ctx.version
         return n
 
@@ -523,6 +524,7 @@ class Projects(BuildingService):
                             f.point_ids = [pt.id if q == old_id else q for q in f.point_ids]
                             tx.update_feature(f)
                 rename_point(tx, pid, old_id, pt.id)
+            self.keep_surfaces(tx, p, using=pt.id)
             before, after = audit.changed(was, audit.point_values(pt))
             action = "ray excluded" if changes.get("exclude_ray") is not None else \
                 "ray restored" if changes.get("restore_ray") is not None else "changed"

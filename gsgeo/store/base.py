@@ -16,7 +16,7 @@ point it writes, unchecked (a re-measure writes derived state of points it has j
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from datetime import datetime
@@ -30,6 +30,7 @@ from gsgeo.store.records import (
     PointRecord,
     Project,
 )
+from gsgeo.store.surfaces import BuildingSurface
 
 
 @dataclass(frozen=True)
@@ -189,6 +190,18 @@ class Transaction(ABC):
         ``old_id`` is its previous id when it is being renamed."""
     @abstractmethod
     def delete_building(self, pid: str, bid: str) -> bool: ...
+
+    def keeps_building_surfaces(self) -> bool:
+        """Whether this store keeps the surfaces of built buildings for GIS clients (then the
+        service calls :meth:`set_building_surfaces` whenever a building's model may change)."""
+        return False
+
+    def set_building_surfaces(self, pid: str, bid: str,
+                              surfaces: Sequence[BuildingSurface]) -> None:
+        """Replace the kept surfaces of building ``bid`` (none: it cannot be built now). They
+        go with the building when it is deleted and follow it when it is renamed. A store that
+        keeps none ignores this."""
+        return None
 
     # check points
     @abstractmethod

@@ -115,6 +115,25 @@ MIGRATIONS: list[str] = [
     CREATE INDEX audit_project ON audit(project_id, seq);
     ALTER TABLE points ADD COLUMN measured_by TEXT;
     """,
+    # 3: the surfaces of built buildings, kept for the PostGIS buildings layer (rewritten by
+    # the service with every change that can move a building; they go with their building;
+    # as WKB, not a geometry column, so that only the typed per-project views are layers),
+    # and the version of the per-project views (gsgeo.store.pgviews.VIEWS_VERSION), so that
+    # views made by an older gsgeo are made again on start
+    """
+    CREATE TABLE building_surfaces (
+        fid BIGSERIAL PRIMARY KEY,
+        project_id TEXT NOT NULL,
+        building_id TEXT NOT NULL,
+        surface_index INTEGER NOT NULL,
+        attrs JSON NOT NULL,
+        wkb BYTEA NOT NULL,
+        UNIQUE (project_id, building_id, surface_index),
+        FOREIGN KEY (project_id, building_id) REFERENCES buildings(project_id, id)
+            ON DELETE CASCADE ON UPDATE CASCADE
+    );
+    ALTER TABLE gsgeo_schema ADD COLUMN views INTEGER NOT NULL DEFAULT 0;
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

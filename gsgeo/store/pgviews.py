@@ -1,12 +1,16 @@
 """PostGIS views of one project, for GIS clients (QGIS) reading the database directly.
 
-Per project three views, registered in PostGIS's ``geometry_columns`` through their typed
-geometry column: ``gsgeo_<id>_points`` (the point-schema record columns, geometry
-``PointZ`` from easting, northing, height), ``gsgeo_<id>_lines`` (``LineStringZ`` through
-the line's solved points in order) and ``gsgeo_<id>_polygons`` (``PolygonZ``, the ring
-closed). The SRID is the EPSG code of the project's grid CRS (the horizontal part of a
-compound ``EPSG:h+v``; 0 when the CRS has no EPSG code). They read the stored tables, so
-they are always current; they are recreated when the project's CRS changes.
+Per project four views, registered in PostGIS's ``geometry_columns`` through their typed
+geometry column: ``gsgeo_<id>_points`` (the point-schema record columns and the point's
+provenance, gsgeo.pointschema.EXPORT_KEYS, geometry ``PointZ`` from easting, northing,
+height), ``gsgeo_<id>_lines`` (``LineStringZ`` through the line's solved points in order),
+``gsgeo_<id>_polygons`` (``PolygonZ``, the ring closed) and ``gsgeo_<id>_buildings`` (one
+``PolygonZ`` per surface of each built building, the columns of
+gsgeo.pointschema.BUILDING_TYPES, from the surfaces the service keeps in
+``building_surfaces``). The SRID is the EPSG code of the project's grid CRS (the horizontal
+part of a compound ``EPSG:h+v``; 0 when the CRS has no EPSG code). They read the stored
+tables, so they are always current; they are recreated when the project's CRS changes, and
+for every project when this gsgeo's views (VIEWS_VERSION) are newer than the database's.
 """
 
 from __future__ import annotations
@@ -16,14 +20,17 @@ import re
 
 from psycopg import sql
 
-from gsgeo.pointschema import RECORD_KEYS
+from gsgeo.pointschema import BUILDING_TYPES, RECORD_KEYS
 
 #: Record columns that are text (measured_at becomes a timestamptz) and integers; the rest
 #: are double precision.
 TEXT_KEYS = frozenset({"point_id", "code", "description", "height_type", "vertical_datum",
                        "crs", "operation"})
 INT_KEYS = frozenset({"n_rays"})
-KINDS = ("points", "lines", "polygons")
+KINDS = ("points", "lines", "polygons", "buildings")
+#: The version of the views this module makes: 2 added the points' provenance columns and
+#: the buildings view.
+VIEWS_VERSION = 2
 
 # An ISO 8601 instant with a zone offset, which alone is cast (a bad text gives NULL, not an
 # error that would make the whole view unreadable)
@@ -47,14 +54,19 @@ def srid_of(crs: str | None) -> int:
     return int(m.group(1)) if m else 0
 
 
-def _column(key: str) -> sql.Composable:
+def _column(key: str, kind: str | None = None) -> sql.Composable:
+    """The typed column ``key`` of the JSON record ``r``: ``kind`` 'str', 'int' or 'float'
+    (None: a point-schema key, typed by TEXT_KEYS / INT_KEYS)."""
+    if kind is None:
+        kind = "str" if key in TEXT_KEYS else "int" if key in INT_KEYS else \
+            "instant" if key == "measured_at" else "float"
     text = sql.SQL("(r->>{})").format(sql.Literal(key))
-    if key in TEXT_KEYS:
+    if kind == "str":
         expr: sql.Composable = text
-    elif key in INT_KEYS:
+    elif kind == "int":
         expr = sql.SQL("CASE WHEN jsonb_typeof(r->{k}) = 'number' THEN {t}::float8::integer END"
                        ).format(k=sql.Literal(key), t=text)
-    elif key == "measured_at":
+    elif kind == "instant":
         expr = sql.SQL("CASE WHEN {t} ~ {re} THEN {t}::timestamptz END").format(
             t=text, re=sql.Literal(INSTANT_RE))
     else:
@@ -72,17 +84,21 @@ def drop_views(pid: str) -> list[sql.Composed]:
 def create_views(pid: str, crs: str | None) -> list[sql.Composed]:
     """Statements (re)creating the project's views with the SRID of ``crs``."""
     srid = sql.Literal(srid_of(crs))
-    points, lines, polygons = (sql.Identifier(view_name(pid, k)) for k in KINDS)
+    points, lines, polygons, buildings = (sql.Identifier(view_name(pid, k)) for k in KINDS)
     p = sql.Literal(pid)
     cols = sql.SQL(", ").join(_column(k) for k in RECORD_KEYS)
     num = "CASE WHEN jsonb_typeof(r->'{k}') = 'number' THEN (r->>'{k}')::float8 END"
     xyz = sql.SQL(", ").join(sql.SQL(num.format(k=k)) for k in ("easting", "northing", "height"))
     out = drop_views(pid)
     out.append(sql.SQL(
-        "CREATE VIEW {points} AS SELECT pt.seq AS fid, pt.id AS id, {cols}, pt.version AS version,"
-        " pt.updated_at AS updated_at,"
+        "CREATE VIEW {points} AS SELECT pt.seq AS fid, pt.id AS id, {cols},"
+        " pt.measured_by AS measured_by,"
+        " (json_array_length(pt.rays) - a.n)::integer AS n_rays_clicked,"
+        " a.n::integer AS n_rays_auto, pt.version AS version, pt.updated_at AS updated_at,"
         " ST_SetSRID(ST_MakePoint({xyz}), {srid})::geometry(PointZ, {srid}) AS geom"
         " FROM points pt CROSS JOIN LATERAL (SELECT pt.result::jsonb AS r) j"
+        " CROSS JOIN LATERAL (SELECT count(*) AS n FROM json_array_elements(pt.rays) e"
+        " WHERE e->>'auto' = 'true') a"
         " WHERE pt.project_id = {p} AND pt.result IS NOT NULL"
     ).format(points=points, cols=cols, xyz=xyz, srid=srid, p=p))
     line_of = ("SELECT f.seq AS fid, f.id AS id, f.code AS code, f.description AS description,"
@@ -103,4 +119,13 @@ def create_views(pid: str, crs: str | None) -> list[sql.Composed]:
         " CASE WHEN n >= 3 THEN ST_MakePolygon(ST_AddPoint(line, ST_StartPoint(line))) END"
         "::geometry(PolygonZ, {srid}) AS geom FROM (" + line_of + ") s"
     ).format(polygons=polygons, points=points, p=p, kind=sql.Literal("polygon"), srid=srid))
+    surface_cols = sql.SQL(", ").join(_column(k, t) for k, t in BUILDING_TYPES.items()
+                                      if k not in ("building_id", "surface_index"))
+    out.append(sql.SQL(
+        "CREATE VIEW {buildings} AS SELECT s.fid AS fid, s.building_id AS building_id,"
+        " s.surface_index AS surface_index, {cols},"
+        " ST_SetSRID(ST_GeomFromWKB(s.wkb), {srid})::geometry(PolygonZ, {srid}) AS geom"
+        " FROM building_surfaces s CROSS JOIN LATERAL (SELECT s.attrs::jsonb AS r) j"
+        " WHERE s.project_id = {p}"
+    ).format(buildings=buildings, cols=surface_cols, srid=srid, p=p))
     return out

@@ -34,7 +34,7 @@ from gsgeo.pointschema import RECORD_KEYS
 from gsgeo.store.accountrecords import AuditEntry, UserRecord
 from gsgeo.store.base import PointFilter, PointRow, Store, Transaction, result_rows
 from gsgeo.store.pgmigrations import MIGRATIONS, SCHEMA_VERSION
-from gsgeo.store.pgviews import create_views, drop_views
+from gsgeo.store.pgviews import VIEWS_VERSION, create_views, drop_views
 from gsgeo.store.records import (
     BuildingRecord,
     CheckPointRecord,
@@ -45,6 +45,7 @@ from gsgeo.store.records import (
     Project,
 )
 from gsgeo.store.sqlite import StoreError, now_iso
+from gsgeo.store.surfaces import BuildingSurface
 
 #: The advisory lock every write transaction holds (any constant; "gsgeo" in ASCII).
 WRITE_LOCK = 0x6773_6765_6F
@@ -446,6 +447,22 @@ class PostgresTransaction(Transaction):
         return self._count("DELETE FROM buildings WHERE project_id = %s AND id = %s",
                            (pid, bid)) > 0
 
+    def keeps_building_surfaces(self) -> bool:
+        return True
+
+    def set_building_surfaces(self, pid: str, bid: str,
+                              surfaces: Sequence[BuildingSurface]) -> None:
+        self._count("DELETE FROM building_surfaces WHERE project_id = %s AND building_id = %s",
+                    (pid, bid))
+        if not surfaces:
+            return
+        with self.con.cursor() as cur:
+            cur.executemany(
+                b"INSERT INTO building_surfaces (project_id, building_id, surface_index, attrs,"
+                b" wkb) VALUES (%s, %s, %s, %s, ST_AsBinary(ST_GeomFromText(%s)))",
+                [nul_free((pid, bid, f.surface_index, json_text(f.values), f.wkt()))
+                 for f in surfaces])
+
     # check points ---------------------------------------------------------------------
     def list_check_points(self, pid: str) -> list[CheckPointRecord]:
         rows = self._all("SELECT * FROM check_points WHERE project_id = %s ORDER BY id", (pid,))
@@ -608,10 +625,25 @@ class PostgresStore(Store):
                             continue  # another server migrated meanwhile
                         con.execute(MIGRATIONS[v].encode())
                         con.execute("UPDATE gsgeo_schema SET version = %s", (v + 1,))
+                self._refresh_views(con)
             except psycopg.Error as exc:
                 msg = " ".join(str(exc).split())
                 raise StoreError(f"{self._where}: cannot prepare the gsgeo schema: {msg}") \
                     from None
+
+    @staticmethod
+    def _refresh_views(con: psycopg.Connection[Row]) -> None:
+        """Make every project's views again when the database's were made by an older gsgeo
+        (gsgeo.store.pgviews.VIEWS_VERSION), once, under the migration lock."""
+        with con.transaction():
+            con.execute("SELECT pg_advisory_xact_lock(%s)", (MIGRATE_LOCK,))
+            row = con.execute("SELECT views FROM gsgeo_schema").fetchone()
+            if row is None or int(row["views"]) >= VIEWS_VERSION:
+                return
+            for p in con.execute("SELECT id, crs FROM projects ORDER BY id").fetchall():
+                for statement in create_views(p["id"], p["crs"]):
+                    con.execute(statement)
+            con.execute("UPDATE gsgeo_schema SET views = %s", (VIEWS_VERSION,))
 
     def _enable_postgis(self, con: psycopg.Connection[Row]) -> None:
         if con.execute("SELECT 1 FROM pg_extension WHERE extname = 'postgis'").fetchone():
