@@ -75,3 +75,63 @@ def test_depth_of_a_bad_ray_is_422_naming_the_field(served, ray, field):
     r = client.post("/api/scenes/plane/depth", json={"ray": ray})
     assert r.status_code == 422, r.text
     assert field in r.json()["message"]
+
+
+# /api/match ---------------------------------------------------------------------------------
+def _match_body(angle: float = 40.0) -> tuple[dict, np.ndarray]:
+    from test_aim_match import CLICKS, REF, camera, oblique, render, textured, truth
+
+    from gsgeo.aim.images import encode_png
+
+    tex = textured(np.random.default_rng(3))
+    tgt = camera(oblique(angle), [0.4, -0.3, 0.0])
+    px, t = truth(REF, tgt, CLICKS[0])
+    body = {"reference": {"image": "data:image/png;base64," + encode_png(render(REF, tex)),
+                          "camera": REF.to_json(), "pixel": CLICKS[0].tolist()},
+            "target": {"image": encode_png(render(tgt, tex)), "origin": [0, 0],
+                       "camera": tgt.to_json()},
+            "depth": {"near_m": t - 0.5, "far_m": t + 0.5, "depth_m": t}}
+    return body, px
+
+
+def test_match_finds_the_click_in_the_target_view(served):
+    client, _ = served
+    body, px = _match_body()
+    r = client.post("/api/match", json=body)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["ok"] is True and out["reason"] is None
+    # PNG keeps 8 bits: the truth within 0.3 px still
+    assert np.linalg.norm(np.array(out["pixel"]) - px) < 0.3
+    assert out["score"] > 0.9
+
+
+def test_match_declines_with_a_reason_and_200(served):
+    client, _ = served
+    body, _ = _match_body()
+    body["reference"]["pixel"] = [3.0, 3.0]
+    r = client.post("/api/match", json=body)
+    assert r.status_code == 200
+    assert r.json()["ok"] is False and r.json()["pixel"] is None
+    assert r.json()["reason"].startswith("outside the view")
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda b: b["reference"].update(image="not base64!"), "reference.image"),
+    (lambda b: b["target"].update(image="aGVsbG8gd29ybGQ="), "target.image"),
+    (lambda b: b["target"]["camera"].update(up=b["target"]["camera"]["direction"]),
+     "target.camera.up"),
+    (lambda b: b["target"]["camera"].update(direction=[0, 0, 0]), "target.camera.direction"),
+    (lambda b: b["reference"]["camera"].update(fovy=4.0), "reference.camera.fovy"),
+    (lambda b: b["depth"].update(near_m=b["depth"]["far_m"] + 1), "depth"),
+    (lambda b: b["depth"].update(depth_m=b["depth"]["far_m"] + 1), "depth.depth_m"),
+    (lambda b: b["reference"].pop("pixel"), "reference.pixel"),
+    (lambda b: b.pop("depth"), "depth"),
+])
+def test_match_of_a_bad_request_is_422_naming_the_field(served, change, field):
+    client, _ = served
+    body, _ = _match_body()
+    change(body)
+    r = client.post("/api/match", json=body)
+    assert r.status_code == 422, r.text
+    assert field in r.json()["message"], r.json()["message"]

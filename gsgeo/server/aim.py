@@ -19,7 +19,7 @@ from gsgeo.server.api import ErrorBody
 from gsgeo.server.models import Ray, rays_of
 from gsgeo.server.scenes import SceneFolders
 from gsgeo.service import ConflictError, NotFoundError
-from gsgeo.service.aiming import depth_on_ray
+from gsgeo.service.aiming import depth_on_ray, match_views
 
 router = APIRouter(prefix="/api", tags=["aiming"], responses={
     404: {"model": ErrorBody, "description": "no such scene"},
@@ -28,6 +28,12 @@ router = APIRouter(prefix="/api", tags=["aiming"], responses={
     422: {"model": ErrorBody, "description": "malformed request; message names the field"},
 })
 
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+Vec2 = Annotated[list[Finite], Field(min_length=2, max_length=2)]
+Metres = Annotated[float, Field(ge=0, le=1e7, allow_inf_nan=False)]
+Image = Annotated[str, Field(min_length=1, max_length=16_000_000,
+                             description="base64 PNG or JPEG, a data: URL prefix allowed")]
 SceneName = Annotated[str, Field(max_length=64, description="scene name in DATA/scenes/")]
 
 
@@ -69,3 +75,59 @@ def one_ray(ray: Ray, field: str = "ray") -> RayArrays:
              summary="Depth hint and near/far bounds of the splats along a ray")
 def depth(scene: SceneName, body: DepthRequest, request: Request) -> dict[str, Any]:
     return depth_on_ray(scene_folder(request, scene), one_ray(body.ray))
+
+
+class CameraModel(BaseModel):
+    """The viewer's camera at capture (rendered ECEF; canvas size in CSS px)."""
+
+    model_config = ConfigDict(extra="ignore")
+    position: Vec3
+    direction: Vec3 = Field(description="unit view direction")
+    up: Vec3 = Field(description="unit up, orthogonal to direction")
+    fovy: Annotated[float, Field(gt=0, lt=3.14159, allow_inf_nan=False)] = Field(
+        description="vertical field of view, radians")
+    width: Annotated[float, Field(ge=1, le=100_000, allow_inf_nan=False)]
+    height: Annotated[float, Field(ge=1, le=100_000, allow_inf_nan=False)]
+
+
+class TargetView(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    image: Image
+    origin: Vec2 = Field(default_factory=lambda: [0.0, 0.0],
+                         description="window coordinates of the image's top-left corner")
+    camera: CameraModel
+
+
+class ReferenceView(TargetView):
+    pixel: Vec2 = Field(description="window coordinates of the click")
+
+
+class DepthRange(BaseModel):
+    model_config = ConfigDict(extra="ignore")
+    near_m: Metres
+    far_m: Metres
+    depth_m: Metres
+
+
+class MatchRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    reference: ReferenceView
+    target: TargetView
+    depth: DepthRange
+
+
+class MatchAnswer(BaseModel):
+    ok: bool
+    pixel: list[float] | None = Field(description="window coordinates in the target view")
+    score: float | None = Field(description="peak normalised cross-correlation, -1..1")
+    second: float | None = Field(description="the best other peak along the line")
+    depth_m: float | None = Field(description="along the reference ray, metres")
+    reason: str | None = Field(description="why the match was declined")
+
+
+@router.post("/match", response_model=MatchAnswer,
+             summary="Find the reference view's click in the target view along its epipolar "
+                     "segment")
+def match(body: MatchRequest) -> dict[str, Any]:
+    return match_views(body.reference.model_dump(), body.target.model_dump(),
+                       body.depth.model_dump())

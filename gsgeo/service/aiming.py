@@ -8,7 +8,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from gsgeo.aim.camera import Camera
 from gsgeo.aim.depth import depth_hint
+from gsgeo.aim.images import decode_image
+from gsgeo.aim.match import View, match_feature
 from gsgeo.aim.splatindex import scene_index
 from gsgeo.errors import InputError
 from gsgeo.measure import Rays
@@ -33,3 +38,33 @@ def depth_on_ray(scene_dir: Path, rays: Rays) -> dict[str, Any]:
     hint = depth_hint(index, rays.origins[0], rays.directions[0],
                       ifov if ifov == ifov else None, rays.model_matrix(0))
     return hint.to_json()
+
+
+def camera_of(doc: dict[str, Any], field: str) -> Camera:
+    """The camera of a JSON object (contract: position, direction, up, fovy, width, height);
+    InputError names ``<field>.<member>``."""
+    return Camera.checked(doc["position"], doc["direction"], doc["up"], float(doc["fovy"]),
+                          float(doc["width"]), float(doc["height"]), field)
+
+
+def view_of(doc: dict[str, Any], field: str) -> View:
+    """A rendered view of a JSON object (image: base64 PNG/JPEG, origin, camera)."""
+    origin = doc.get("origin") or [0.0, 0.0]
+    return View(decode_image(doc["image"], f"{field}.image"),
+                np.asarray(origin, dtype=np.float64), camera_of(doc["camera"], f"{field}.camera"))
+
+
+def match_views(reference: dict[str, Any], target: dict[str, Any],
+                depth: dict[str, Any]) -> dict[str, Any]:
+    """The reference click found in the target view (gsgeo.aim.match.match_feature), as the
+    JSON of POST /api/match. ``depth`` holds near_m, far_m and depth_m along the reference
+    ray (metres, from /depth); InputError names the field of a value that cannot be used."""
+    near, far, hint = (float(depth[k]) for k in ("near_m", "far_m", "depth_m"))
+    if not 0.0 <= near <= far:
+        raise InputError("near_m must be >= 0 and <= far_m", field="depth.near_m")
+    if not near <= hint <= far:
+        raise InputError("depth_m must lie between near_m and far_m", field="depth.depth_m")
+    ref = view_of(reference, "reference")
+    tgt = view_of(target, "target")
+    pixel = np.asarray(reference["pixel"], dtype=np.float64)
+    return match_feature(ref, pixel, tgt, near, far, hint).to_json()

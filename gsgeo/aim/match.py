@@ -1,0 +1,268 @@
+"""Finding a clicked feature in another rendered view: patch matching along the epipolar
+segment (OpenCV).
+
+1. The reference ray through the click, and its segment near..far (from the depth hint),
+   projected into the target view: the epipolar segment, cut to the part in front of the
+   target camera and to the target image (less the template's reach).
+2. The patch around the click is warped into the target view by the homography of the
+   plane through the depth-hint point facing the reference camera: parallel to its image
+   plane (normal = the camera's viewing direction), as plane-sweep stereo assumes. The
+   surface's true orientation is unknown from one view; this plane is exact for a surface
+   seen square-on, which is what an operator picks a view for, and it carries the view
+   change's rotation, scale and foreshortening into the patch, which is what makes oblique
+   views match (a plain patch at 60 degrees scores far lower, see the tests).
+3. The target image is resampled into a strip along the segment (``cv2.warpAffine``), the
+   warped patch in the same frame (``cv2.warpPerspective``), so the search is the band of
+   BAND_PX either side of the line, and ``cv2.matchTemplate`` (normalised cross-correlation,
+   TM_CCOEFF_NORMED) scores every position at once.
+4. The peak is refined to sub-pixel (a parabola through it and its neighbours, then the
+   translation that best aligns patch and strip, ``cv2.findTransformECC``) and mapped back
+   to window coordinates; its depth along the reference ray is
+   where the target's pick ray through it comes closest.
+
+A match is declined (``ok`` False, ``reason`` says why) when the patch has no texture or the
+peak is weak, when another peak away from the main one is nearly as high (ambiguous) or
+several are (repeated texture along the line), when the segment is not in the target view
+or the patch leaves the reference image, or when the refined peak falls off the segment.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from gsgeo.aim.camera import Camera, closest_on_first
+from gsgeo.solve.linalg import FloatArray
+
+#: Half size of the matched patch (the template is 2 HALF_PX + 1 pixels square).
+HALF_PX = 12
+#: Half width of the band around the epipolar line searched, pixels.
+BAND_PX = 2
+#: Lowest peak NCC accepted.
+MIN_SCORE = 0.7
+#: A second peak (outside the main peak's neighbourhood) at this fraction of the main peak
+#: or more makes the match ambiguous; several make it repeated texture.
+AMBIGUOUS_RATIO = 0.85
+REPEATS = 2
+#: The main peak's neighbourhood along the line, pixels (its correlation lobe).
+NEIGHBOURHOOD_PX = max(3, HALF_PX // 2)
+#: Grey-level standard deviation below which a patch counts as untextured (0..255 scale).
+MIN_TEXTURE = 2.0
+#: Fraction of the near..far length the matched depth may lie beyond the segment (sub-pixel).
+DEPTH_SLACK = 0.02
+#: Iterations and step (px) at which the sub-pixel alignment stops.
+ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4)
+
+
+@dataclass(frozen=True)
+class View:
+    """A rendered view: grey image (H, W) float32, window coordinates of its top-left
+    corner, and the camera it was rendered with."""
+
+    image: np.ndarray
+    origin: FloatArray
+    camera: Camera
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """``pixel``: window coordinates in the target view; ``depth_m`` along the reference
+    ray (metres); ``score`` the peak NCC, ``second`` the best peak elsewhere on the line."""
+
+    ok: bool
+    pixel: FloatArray | None = None
+    score: float | None = None
+    second: float | None = None
+    depth_m: float | None = None
+    reason: str | None = None
+
+    def to_json(self) -> dict[str, object]:
+        return {"ok": self.ok, "pixel": None if self.pixel is None else self.pixel.tolist(),
+                "score": self.score, "second": self.second, "depth_m": self.depth_m,
+                "reason": self.reason}
+
+
+def declined(reason: str, score: float | None = None, second: float | None = None
+             ) -> MatchResult:
+    return MatchResult(False, score=score, second=second, reason=reason)
+
+
+def clip_segment(p0: FloatArray, p1: FloatArray, lo: FloatArray, hi: FloatArray
+                 ) -> tuple[FloatArray, FloatArray] | None:
+    """The part of segment p0-p1 inside the box lo..hi (Liang-Barsky); None if none."""
+    d = p1 - p0
+    t0, t1 = 0.0, 1.0
+    for k in range(2):
+        for p, q in ((-d[k], p0[k] - lo[k]), (d[k], hi[k] - p0[k])):
+            if abs(p) < 1e-12:
+                if q < 0:
+                    return None
+                continue
+            r = q / p
+            if p < 0:
+                t0 = max(t0, r)
+            else:
+                t1 = min(t1, r)
+    if t0 > t1:
+        return None
+    return p0 + t0 * d, p0 + t1 * d
+
+
+def plane_homography(ref: Camera, tgt: Camera, point: FloatArray, normal: FloatArray,
+                     ref_origin: FloatArray, tgt_origin: FloatArray, at: FloatArray,
+                     size: float) -> np.ndarray | None:
+    """3 x 3 homography from reference image pixel indices to target image pixel indices
+    induced by the plane through ``point`` with ``normal`` (rendered ECEF), fitted on four
+    points ``size`` px around ``at`` (reference window coordinates); None when the plane is
+    seen edge-on or behind either camera."""
+    corners = at + size * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    rays = ref.pick_ray(corners)
+    den = rays @ normal
+    if np.any(np.abs(den) < 1e-9):
+        return None
+    t = ((point - ref.position) @ normal) / den
+    if np.any(t <= 0):
+        return None
+    xy, _ = tgt.project(ref.position + t[:, None] * rays)
+    if not np.all(np.isfinite(xy)):
+        return None
+    src = (corners - ref_origin - 0.5).astype(np.float32)
+    dst = (xy - tgt_origin - 0.5).astype(np.float32)
+    return cv2.getPerspectiveTransform(src, dst).astype(np.float64)
+
+
+def parabola_offset(a: float, b: float, c: float) -> float:
+    """The vertex of the parabola through (-1, a), (0, b), (1, c), within +-0.5."""
+    den = a - 2.0 * b + c
+    if den >= 0 or not math.isfinite(den):
+        return 0.0
+    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+
+def refine(templ: np.ndarray, strip: np.ndarray, col: int, row: int, ds: float, dw: float
+           ) -> tuple[float, float]:
+    """Sub-pixel offsets of the template placed at integer (col, row) of the strip, starting
+    from the parabola's (ds, dw): the translation that best aligns the two images
+    (``cv2.findTransformECC``, enhanced correlation coefficient). The parabola through the
+    NCC samples is biased by up to ~0.15 px towards the sample; the alignment is not. Keeps
+    the parabola's answer when the alignment fails or leaves the peak's pixel."""
+    warp = np.array([[1.0, 0.0, col + ds], [0.0, 1.0, row + dw]], dtype=np.float32)
+    try:
+        everywhere = np.full(strip.shape, 255, dtype=np.uint8)
+        _, found = cv2.findTransformECC(templ, strip, warp, cv2.MOTION_TRANSLATION,
+                                        ECC_CRITERIA, everywhere, 1)
+    except cv2.error:          # not converged (e.g. too little texture): keep the parabola
+        return ds, dw
+    shift = np.asarray(found, dtype=np.float64)[:, 2]
+    ex, ey = float(shift[0]) - col, float(shift[1]) - row
+    if abs(ex) <= 1.0 and abs(ey) <= 1.0:
+        return ex, ey
+    return ds, dw
+
+
+def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: float,
+                  depth: float) -> MatchResult:
+    """The click of the reference view found in the target view (module docstring).
+
+    ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
+    reference ray (near <= depth <= far)."""
+    h, b = HALF_PX, BAND_PX
+    click = np.asarray(click, dtype=np.float64)
+    o = ref.camera.position
+    d = ref.camera.pick_ray(click)[0]
+    # the patch around the click, as the reference view shows it
+    cx, cy = click - ref.origin - 0.5
+    ih, iw = ref.image.shape
+    i0, j0 = int(round(cx)) - h, int(round(cy)) - h
+    if i0 < 0 or j0 < 0 or i0 + 2 * h >= iw or j0 + 2 * h >= ih:
+        return declined("outside the view: the patch around the click reaches beyond the "
+                        "reference image")
+    if float(ref.image[j0:j0 + 2 * h + 1, i0:i0 + 2 * h + 1].std()) < MIN_TEXTURE:
+        return declined("weak: no texture around the click to match")
+    # the epipolar segment in the target image, where the whole template fits
+    seg = tgt.camera.epipolar_segment(o, d, near, far)
+    if seg is None:
+        return declined("outside the view: the segment where the feature can lie is behind "
+                        "the target camera")
+    th, tw = tgt.image.shape
+    reach = h * math.sqrt(2.0) + b + 2.0
+    lo = np.array([reach, reach]) - 0.5
+    hi = np.array([tw - 1 - reach, th - 1 - reach]) + 0.5
+    clipped = clip_segment(seg[0] - tgt.origin - 0.5, seg[1] - tgt.origin - 0.5, lo, hi)
+    if clipped is None:
+        return declined("outside the view: the segment where the feature can lie is not in "
+                        "the target image")
+    p0, p1 = clipped
+    length = float(np.linalg.norm(p1 - p0))
+    u = (p1 - p0) / length if length > 1e-6 else np.array([1.0, 0.0])
+    v = np.array([-u[1], u[0]])
+    # strip frame: (s, w) -> image p0 + (s - h - 1) u + (w - h - b - 1) v
+    ext = 1                                             # one more pixel all round for the fit
+    a = np.array([[u[0], v[0], p0[0] - (h + ext) * u[0] - (h + b + ext) * v[0]],
+                  [u[1], v[1], p0[1] - (h + ext) * u[1] - (h + b + ext) * v[1]],
+                  [0.0, 0.0, 1.0]])
+    n_s = int(math.floor(length)) + 1
+    strip_w, strip_h = n_s + 2 * (h + ext), 2 * (h + b + ext) + 1
+    strip = cv2.warpAffine(tgt.image, a[:2], (strip_w, strip_h),
+                           flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                           borderMode=cv2.BORDER_REPLICATE)
+    # the reference patch warped into the strip frame by the depth hint's plane
+    hom = plane_homography(ref.camera, tgt.camera, o + depth * d, -ref.camera.direction,
+                           ref.origin, tgt.origin,
+                           click, 2.0 * h)
+    if hom is None:
+        return declined("outside the view: the depth hint's plane is not seen by both views")
+    strip_from_ref = np.linalg.inv(a) @ hom
+    c = strip_from_ref @ np.array([cx, cy, 1.0])
+    if abs(c[2]) < 1e-12:
+        return declined("outside the view: the click does not map into the target view")
+    c = c[:2] / c[2]
+    shift = np.array([[1.0, 0.0, c[0] - h], [0.0, 1.0, c[1] - h], [0.0, 0.0, 1.0]])
+    to_ref = np.linalg.inv(strip_from_ref) @ shift
+    size = (2 * h + 1, 2 * h + 1)
+    templ = cv2.warpPerspective(ref.image, to_ref, size,
+                                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+    if float(templ.min()) < 0.0:
+        return declined("outside the view: the warped patch reaches beyond the reference "
+                        "image")
+    if float(templ.std()) < MIN_TEXTURE:
+        return declined("weak: no texture around the click to match")
+    score = cv2.matchTemplate(strip, templ, cv2.TM_CCOEFF_NORMED)
+    score = np.nan_to_num(np.clip(score, -1.0, 1.0), nan=-1.0)
+    # rows: offsets -(b+ext)..(b+ext) from the line; columns: -ext..n_s-1+ext along it
+    inner = score[ext:ext + 2 * b + 1, ext:ext + n_s]
+    w_pk, s_pk = (int(v) for v in np.unravel_index(int(np.argmax(inner)), inner.shape))
+    peak = float(inner[w_pk, s_pk])
+    along = inner.max(axis=0)
+    far_off = np.abs(np.arange(n_s) - s_pk) > NEIGHBOURHOOD_PX
+    second = float(along[far_off].max()) if far_off.any() else -1.0
+    if peak < MIN_SCORE:
+        return declined(f"weak: the best match scores {peak:.2f} (NCC), below {MIN_SCORE}",
+                        peak, second)
+    # other local maxima along the line that are nearly as high
+    left = np.concatenate([[-2.0], along[:-1]])
+    right = np.concatenate([along[1:], [-2.0]])
+    rivals = far_off & (along >= left) & (along > right) & (along >= AMBIGUOUS_RATIO * peak)
+    if int(rivals.sum()) >= REPEATS:
+        return declined(f"repeated texture along the epipolar line: {int(rivals.sum()) + 1} "
+                        f"peaks of NCC {AMBIGUOUS_RATIO * peak:.2f} or more", peak, second)
+    if second >= AMBIGUOUS_RATIO * peak:
+        return declined(f"ambiguous: a second peak of {second:.2f} against {peak:.2f}",
+                        peak, second)
+    rw, rs = w_pk + ext, s_pk + ext
+    ds = parabola_offset(score[rw, rs - 1], score[rw, rs], score[rw, rs + 1])
+    dw = parabola_offset(score[rw - 1, rs], score[rw, rs], score[rw + 1, rs])
+    ds, dw = refine(templ, strip, rs, rw, ds, dw)
+    s, w = s_pk + ds, w_pk - b + dw
+    img_pt = p0 + s * u + w * v
+    pixel = img_pt + tgt.origin + 0.5
+    t = closest_on_first(o, d, tgt.camera.position, tgt.camera.pick_ray(pixel)[0])
+    slack = DEPTH_SLACK * (far - near)
+    if not (math.isfinite(t) and near - slack <= t <= far + slack) or abs(w) > b:
+        return declined("off the segment: the best match does not lie on the segment where "
+                        "the feature can be", peak, second)
+    return MatchResult(True, pixel, peak, second, float(t), None)
