@@ -48,6 +48,19 @@ class Ray:
     pixel: tuple[float, float] | None = None
     viewport: tuple[float, float] | None = None
     model_matrix: FloatArray | None = None  # 16 numbers, column-major; None = identity
+    # provenance: matched automatically (True) or clicked (False; None: not said, a click),
+    # and the match score (peak NCC, None: none); kept with the ray, not used by the solver
+    auto: bool | None = None
+    score: float | None = None
+
+    def provenance(self) -> JSONObject:
+        """The ray's ``auto`` and ``score`` members as given (none when not given)."""
+        out: JSONObject = {}
+        if self.auto is not None:
+            out["auto"] = self.auto
+        if self.score is not None:
+            out["score"] = self.score
+        return out
 
     def to_dict(self) -> JSONObject:
         out: JSONObject = {
@@ -62,7 +75,7 @@ class Ray:
             out["viewport"] = list(self.viewport)
         if self.model_matrix is not None:
             out["model_matrix"] = [float(v) for v in self.model_matrix]
-        return out
+        return out | self.provenance()
 
 
 @dataclass
@@ -213,7 +226,12 @@ def _ray_members(doc: JSON, field: str | None) -> Ray:
         viewport = tuple(_vector(doc["viewport"], 2, at["viewport"]).tolist())
     if doc.get("model_matrix") is not None:
         mm = _vector(doc["model_matrix"], 16, at["model_matrix"])
-    return Ray(origin, direction, ifov, pixel, viewport, mm)
+    auto = doc.get("auto")
+    if auto is not None and not isinstance(auto, bool):
+        raise InputError(f"expected true (matched automatically) or false (clicked), got "
+                         f"{_describe(auto)}", field=join_field(field, "auto"))
+    score = None if doc.get("score") is None else _number(doc["score"], join_field(field, "score"))
+    return Ray(origin, direction, ifov, pixel, viewport, mm, auto, score)
 
 
 def parse_rays(docs: Sequence[JSON], field: str = "") -> tuple[list[Ray], Rays]:

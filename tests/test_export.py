@@ -35,6 +35,7 @@ from gsgeo.export import write_measurements
 from gsgeo.export.csvfile import CSV_COLUMNS
 from gsgeo.export.tables import ELLIPSE_VERTICES, POINT_TYPES
 from gsgeo.measure import RECORD_KEYS, Measurement
+from gsgeo.pointschema import EXPORT_KEYS
 from gsgeo.session import measure_session
 
 EGM96 = Path("/usr/share/proj/egm96_15.gtx")
@@ -114,7 +115,7 @@ def test_gpkg_round_trip(which, request, tmp_path):
     # points: every schema field with its type and value, geometry = E, N, H
     info = pyogrio.read_info(out, layer="points")
     types = dict(zip(info["fields"], info["dtypes"], strict=True))
-    assert list(info["fields"]) == list(RECORD_KEYS)
+    assert list(info["fields"]) == list(EXPORT_KEYS)  # the point schema, then provenance
     for k, kind in POINT_TYPES.items():
         assert types[k] == {"float": "float64", "int": "int32", "str": "object"}[kind], k
     for reader in (pyogrio.read_dataframe, gpd.read_file):
@@ -355,7 +356,7 @@ def test_csv_round_trip(odn, tmp_path):
     text = out.read_text(encoding="utf-8")
     header = text.splitlines()[0]
     assert header.startswith("point_id,easting,northing,height,code,")
-    assert header.split(",") == list(CSV_COLUMNS) and set(CSV_COLUMNS) == set(RECORD_KEYS)
+    assert header.split(",") == list(CSV_COLUMNS) and set(CSV_COLUMNS) == set(EXPORT_KEYS)
     rows = list(csv.DictReader(text.splitlines()))
     assert len(rows) == len(recs)
     for row in rows:

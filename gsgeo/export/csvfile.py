@@ -2,7 +2,8 @@
 
 Column order (CSV_COLUMNS): point_id, easting, northing, height, code, then the rest of the
 point schema in its documented order (description, height_type, vertical_datum, crs, sigma_e, ...,
-measured_at). Every row states its CRS, height type and vertical datum, so the file stands
+measured_at), then who measured the point and how its rays were aimed (measured_by,
+n_rays_clicked, n_rays_auto). Every row states its CRS, height type and vertical datum, so the file stands
 alone. UTF-8 without BOM, comma separated, "\\n" line ends, empty field = unknown (null).
 
 Numbers: easting, northing, height and h_wgs84 with 4 decimals (0.1 mm, in the CRS's units);
@@ -23,11 +24,11 @@ import numpy as np
 import orjson
 
 from gsgeo.export.tables import ExportData
-from gsgeo.measure.schema import RECORD_KEYS
+from gsgeo.pointschema import EXPORT_KEYS
 
 FIRST = ("point_id", "easting", "northing", "height", "code")
 #: The CSV's columns, in order.
-CSV_COLUMNS = FIRST + tuple(k for k in RECORD_KEYS if k not in FIRST)
+CSV_COLUMNS = FIRST + tuple(k for k in EXPORT_KEYS if k not in FIRST)
 FIXED_DECIMALS = {"easting": 4, "northing": 4, "height": 4, "h_wgs84": 4, "lon": 10, "lat": 10}
 CHUNK = 10000
 _SPECIAL = (",", '"', "\r", "\n")

@@ -34,14 +34,15 @@ from gsgeo.measure.features import (
     polygon_measures_many,
 )
 from gsgeo.measure.schema import RECORD_KEYS
-from gsgeo.pointschema import BUILDING_MEASURES, BUILDING_TYPES
+from gsgeo.pointschema import BUILDING_MEASURES, BUILDING_TYPES, EXPORT_KEYS, PROVENANCE_KEYS
 
-#: Column types of the point schema (the README's "Point schema"): 'str', 'float' or 'int'.
-POINT_TYPES: dict[str, str] = {k: "float" for k in RECORD_KEYS}
+#: Column types of a point in an export (the README's "Point schema" and the provenance
+#: columns after it, gsgeo.pointschema.EXPORT_KEYS): 'str', 'float' or 'int'.
+POINT_TYPES: dict[str, str] = {k: "float" for k in EXPORT_KEYS}
 POINT_TYPES.update(dict.fromkeys(
     ("point_id", "code", "description", "height_type", "vertical_datum", "crs", "operation",
-     "measured_at"), "str"))
-POINT_TYPES["n_rays"] = "int"
+     "measured_at", "measured_by"), "str"))
+POINT_TYPES.update(dict.fromkeys(("n_rays", "n_rays_clicked", "n_rays_auto"), "int"))
 
 #: Column types of the other layers (GeoPackage rays, lines, polygons, error_ellipses,
 #: check_points), in column order; the OGC API's collections announce the same.
@@ -302,10 +303,37 @@ def ellipse_rings(e: ArrayLike, n: ArrayLike, major: ArrayLike, minor: ArrayLike
     return ring
 
 
+def _provenance_columns(solved: list, ids: list[str],
+                        provenance: Mapping[str, Mapping[str, Any]] | None) -> dict[str, list]:
+    """The PROVENANCE_KEYS columns: from ``provenance`` (point id -> its values, as
+    gsgeo.pointschema.provenance gives them) where it names the point; otherwise unknown
+    measured_by and every ray taken as clicked (a Measurement or result does not say)."""
+    given = provenance or {}
+    cols: dict[str, list] = {k: [] for k in PROVENANCE_KEYS}
+    for m, pid in zip(solved, ids, strict=True):
+        got = given.get(pid)
+        if got is None:
+            rays = _get(m, "excluded")
+            if rays is None:
+                rays = _get(m, "rays") or ()
+            got = {"measured_by": None, "n_rays_clicked": len(rays), "n_rays_auto": 0}
+        for k in PROVENANCE_KEYS:
+            cols[k].append(got.get(k))
+    for k in ("n_rays_clicked", "n_rays_auto"):
+        if any(not isinstance(v, int) or isinstance(v, bool) for v in cols[k]):
+            raise InputError(f"column {k}: expected a whole number of rays for every point")
+    return cols
+
+
 def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
             polygons: Iterable[Any] = (), check_points: Iterable[Any] = (),
-            buildings: Iterable[Any] = (), map_layers: bool = True) -> ExportData:
+            buildings: Iterable[Any] = (), map_layers: bool = True,
+            provenance: Mapping[str, Mapping[str, Any]] | None = None) -> ExportData:
     """Validate and gather everything an export writes (see module docstring).
+
+    ``provenance``: point id -> its PROVENANCE_KEYS values (who measured it, rays clicked and
+    matched automatically), the columns after the point schema; a point it does not name
+    has measured_by unknown and all its rays counted as clicked.
 
     map_layers=False leaves out the rays, error ellipses and buildings (GeoPackage-only
     layers). ``buildings``: built LoD2 models in the measurements' grid CRS, each with ``id``,
@@ -361,6 +389,9 @@ def collect(measurements: Iterable[Any], *, lines: Iterable[Any] = (),
     crs_text = str(first["crs"])
 
     cols = {k: _column(raw[k], POINT_TYPES[k], k, as_text) for k in RECORD_KEYS}
+    cols.update((k, _column(v, POINT_TYPES[k], k))
+                for k, v in _provenance_columns(solved, [str(i) for i in ids],
+                                                provenance).items())
     points = Table(cols, dict(POINT_TYPES))
     xyz = np.column_stack([cols["easting"], cols["northing"], cols["height"]])
     llh = np.column_stack([cols["lon"], cols["lat"], cols["h_wgs84"]])

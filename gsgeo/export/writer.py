@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 from gsgeo.errors import InputError
 from gsgeo.export.atomic import atomic_path, check_target
 from gsgeo.export.tables import collect
+from gsgeo.pointschema import provenance as provenance_of
 
 #: Formats and the suffixes that select them.
 FORMATS = ("gpkg", "geojson", "geojson-grid", "csv")
@@ -34,7 +35,8 @@ def format_for(path: str | os.PathLike, fmt: str | None = None) -> str:
 def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
                        lines: Iterable[Any] = (), polygons: Iterable[Any] = (),
                        check_points: Iterable[Any] = (), buildings: Iterable[Any] = (),
-                       fmt: str | None = None) -> Path:
+                       fmt: str | None = None,
+                       provenance: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
     """Export measured points, lines, polygons and check points to GeoPackage, GeoJSON or CSV.
 
     Parameters
@@ -54,6 +56,9 @@ def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
         a GeoPackage layer "buildings" (one row per surface), not part of GeoJSON or CSV.
     fmt : 'gpkg', 'geojson' (RFC 7946), 'geojson-grid' (legacy grid coordinates with a crs
         member, not RFC 7946) or 'csv'; None: from the suffix.
+    provenance : point id -> who measured it and how many of its rays were clicked and
+        matched automatically (gsgeo.pointschema.provenance), the points' last columns; a
+        point it does not name: measured_by unknown, every ray counted as clicked.
 
     Returns the path written. Raises InputError / GeometryError / CRSError with a message
     naming the problem; nothing is written then.
@@ -61,7 +66,7 @@ def write_measurements(path: str | os.PathLike, measurements: Iterable[Any], *,
     kind = format_for(path, fmt)
     target = check_target(path)
     data = collect(measurements, lines=lines, polygons=polygons, check_points=check_points,
-                   buildings=buildings, map_layers=kind == "gpkg")
+                   buildings=buildings, map_layers=kind == "gpkg", provenance=provenance)
     with atomic_path(target) as tmp:
         if kind == "gpkg":
             from gsgeo.export.gpkg import write_gpkg
@@ -82,6 +87,9 @@ def write_session_results(path: str | os.PathLike, results: Iterable[Any], sessi
                           fmt: str | None = None, buildings: Iterable[Any] = ()) -> Path:
     """`write_measurements` for `gsgeo solve -o`: measure_session results + the session's
     features (and its built buildings)."""
+    points = getattr(session, "points", ()) or ()
     return write_measurements(path, results, lines=getattr(session, "lines", ()) or (),
                               polygons=getattr(session, "polygons", ()) or (),
-                              buildings=buildings, fmt=fmt)
+                              buildings=buildings, fmt=fmt,
+                              provenance={p.id: provenance_of([r.to_dict() for r in p.rays],
+                                                              None) for p in points})

@@ -28,6 +28,9 @@ from gsgeo.solve.linalg import FloatArray
 
 #: The session-JSON members of a ray, in the order they are written.
 RAY_KEYS = ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")
+#: Members of a stored ray that say how it was aimed (matched automatically or clicked, the
+#: match score), kept with it and never read by the solver.
+RAY_PROVENANCE_KEYS = ("auto", "score")
 
 
 def _optional_rows(values: Sequence[ArrayLike | None] | np.ndarray | None, n: int,

@@ -427,6 +427,14 @@ def _accuracy_section(data: JSONObject) -> Section:
     return Section("Accuracy against check points", "accuracy", blocks)
 
 
+def _aimed(row: JSONObject) -> str:
+    """'clicked / auto' ray counts of a point row ('' when the row does not say)."""
+    clicked, auto = row.get("n_rays_clicked"), row.get("n_rays_auto")
+    if clicked is None and auto is None:
+        return ""
+    return f"{fmt_text(clicked)} / {fmt_text(auto)}"
+
+
 def _points_section(data: JSONObject) -> Section:
     pts = data.get("points") or []
     failed = data.get("failed_points") or []
@@ -445,26 +453,27 @@ def _points_section(data: JSONObject) -> Section:
             [("Point", False), ("Code", False), (f"E [{unit}]", True), (f"N [{unit}]", True),
              (f"H [{unit}]", True), ("σE [mm]", True), ("σN [mm]", True), ("σH [mm]", True),
              ("σE meas [mm]", True), ("σN meas [mm]", True), ("σH meas [mm]", True),
-             ("rays", True),
+             ("rays", True), ("clicked / auto", True),
              ("σ0", True)],
             [[str(r["point_id"]), fmt_text(r.get("code")) if r.get("code") else "",
               fmt_m(r.get("easting")), fmt_m(r.get("northing")), fmt_m(r.get("height")),
               fmt_mm(r.get("sigma_e")), fmt_mm(r.get("sigma_n")), fmt_mm(r.get("sigma_h")),
               fmt_mm(r.get("sigma_e_meas")), fmt_mm(r.get("sigma_n_meas")),
-              fmt_mm(r.get("sigma_h_meas")), fmt_text(r.get("n_rays")),
+              fmt_mm(r.get("sigma_h_meas")), fmt_text(r.get("n_rays")), _aimed(r),
               fmt_g(r.get("sigma0"), 3)] for r in pts],
             caption="1σ in millimetres: total (aiming and georeference) and measurement-only "
-                    "(aiming alone)."))
+                    "(aiming alone). rays: used in the solution; clicked / auto: how all of "
+                    "the point's rays were aimed (by a click, or matched automatically)."))
     ecef = data.get("ecef_points") or []
     if ecef:
         blocks.append(_table(
             [("Point", False), ("Code", False), ("X [m]", True), ("Y [m]", True),
              ("Z [m]", True), ("σX [mm]", True), ("σY [mm]", True), ("σZ [mm]", True),
-             ("rays", True), ("σ0", True)],
+             ("rays", True), ("clicked / auto", True), ("σ0", True)],
             [[str(r["point_id"]), fmt_text(r.get("code")) if r.get("code") else "",
               fmt_m(r.get("x")), fmt_m(r.get("y")), fmt_m(r.get("z")),
               fmt_mm(r.get("sigma_x")), fmt_mm(r.get("sigma_y")), fmt_mm(r.get("sigma_z")),
-              fmt_text(r.get("n_rays")), fmt_g(r.get("sigma0"), 3)] for r in ecef],
+              fmt_text(r.get("n_rays")), _aimed(r), fmt_g(r.get("sigma0"), 3)] for r in ecef],
             caption="Without a grid CRS: the points in the scene's geocentric frame (ECEF, as "
                     "rendered), with their total 1σ along its axes."))
     if not pts and not ecef:

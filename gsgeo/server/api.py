@@ -139,8 +139,11 @@ def intersect_request(body: m.IntersectRequest, data_dir: Path) -> Response:
     """The work of POST /intersect, on a thread of gsgeo.server.intersect_pool."""
     point = body.to_input()
     excluded, settings = check_intersect(point, body.settings(), data_dir)
-    return fast_json(measure(point.rays, settings, excluded, data_dir, point_id=body.id,
-                             code=body.code, description=body.description).to_dict())
+    out = measure(point.rays, settings, excluded, data_dir, point_id=body.id, code=body.code,
+                  description=body.description).to_dict()
+    for ray, given in zip(out["rays"], point.provenance, strict=False):
+        ray.update(given)  # the ray's auto / score, returned as given
+    return fast_json(out)
 
 
 @router.get("/crs", summary="Search coordinate reference systems by name, area or code")
@@ -226,8 +229,8 @@ def get_session(pid: PID, request: Request) -> dict[str, Any]:
     p = s.get_project(pid)
     return {"source_crs": p.source_crs, "crs": p.crs, "vertical": p.vertical,
             "sigma_px": p.sigma_px,
-            "points": [{"id": q.id, "code": q.code, "description": q.description, "rays": q.rays}
-                       for q in s.list_points(pid)],
+            "points": [{"id": q.id, "code": q.code, "description": q.description, "rays": q.rays,
+                        "measured_by": q.measured_by} for q in s.list_points(pid)],
             "lines": [{"id": f.id, "points": f.point_ids} for f, _ in s.list_features(pid, "line")],
             "polygons": [{"id": f.id, "points": f.point_ids}
                          for f, _ in s.list_features(pid, "polygon")],
@@ -276,8 +279,8 @@ def get_point(pid: PID, point_id: ITEM, request: Request) -> dict[str, Any] | Re
 def patch_point(pid: PID, point_id: ITEM, body: m.PointPatch, request: Request,
                 if_match: IfMatch = None) -> dict[str, Any] | Response:
     changes = {k: v for k, v in body.model_dump(exclude_unset=True).items() if v is not None}
-    if body.rays is not None:
-        changes["rays"] = m.rays_of(body.rays)
+    if body.rays is not None:  # session-JSON rays: their auto / score are kept
+        changes["rays"] = [r.model_dump(exclude_none=True) for r in body.rays]
     pt = svc(request).update_point(pid, point_id, changes, if_match_versions(if_match))
     return with_etag(fast_json(point_json(pt)), pt.version)
 

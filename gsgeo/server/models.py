@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from gsgeo.limits import IFOV_MAX, IFOV_MIN, SIGMA_PX_MAX, SIGMA_PX_MIN
 from gsgeo.measure import Rays as RayArrays
@@ -42,6 +42,13 @@ class Ray(BaseModel):
     viewport: Vec2 | None = Field(None, description="canvas size (CSS px)")
     model_matrix: Mat16 | None = Field(
         None, description="tileset modelMatrix at the click, 16 numbers, column-major")
+    auto: StrictBool | None = Field(
+        None, description="matched automatically (true) or clicked (false; the default)")
+    score: Finite | None = Field(None, description="the match score of an automatic ray")
+
+    def provenance(self) -> dict[str, Any]:
+        """The ray's ``auto`` and ``score`` as given (kept with the stored ray)."""
+        return self.model_dump(include={"auto", "score"}, exclude_none=True)
 
 
 Rays = Annotated[list[Ray], Field(min_length=2, max_length=1000)]
@@ -76,7 +83,8 @@ class IntersectRequest(SolveSettings):
     def to_input(self) -> PointInput:
         """The point to measure (typed rays; ``exclude`` as its excluded rays)."""
         return PointInput(rays=rays_of(self.rays), id=self.id, code=self.code,
-                          description=self.description, excluded=list(self.exclude))
+                          description=self.description, excluded=list(self.exclude),
+                          provenance=[r.provenance() for r in self.rays])
 
     def settings(self) -> dict[str, str | float | None]:
         """crs, vertical, geoid, source_crs, sigma_px as a project's settings."""
@@ -120,7 +128,8 @@ class PointCreate(BaseModel):
         """The point to store (typed rays)."""
         return PointInput(rays=rays_of(self.rays), id=self.id, code=self.code,
                           description=self.description, excluded=list(self.excluded),
-                          georef_version=self.georef_version)
+                          georef_version=self.georef_version,
+                          provenance=[r.provenance() for r in self.rays])
 
 
 class PointPatch(BaseModel):

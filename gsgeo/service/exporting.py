@@ -20,6 +20,7 @@ from gsgeo.export import write_measurements
 from gsgeo.export.atomic import atomic_path
 from gsgeo.jsontypes import JSONObject
 from gsgeo.measure import Measurement
+from gsgeo.pointschema import provenance
 from gsgeo.service.buildings import building_model, dtm_in_data_dir, reference_crs
 from gsgeo.service.measuring import measure, stored_rays
 from gsgeo.service.projects import (
@@ -105,7 +106,8 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
                   "height": None if x[2] != x[2] else float(x[2])} for c, x in zip(cps, xyz,
                                                                                   strict=True)]
     write_measurements(path, measurements, lines=kept["line"], polygons=kept["polygon"],
-                       check_points=check, buildings=models, fmt=fmt)
+                       check_points=check, buildings=models, fmt=fmt,
+                       provenance={pt.id: provenance(pt.rays, pt.measured_by) for pt in points})
     return path, skipped
 
 

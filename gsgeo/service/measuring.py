@@ -23,7 +23,7 @@ from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, Rays, SolveSettings, measure_point
 from gsgeo.measure.framecov import FrameCovariance
-from gsgeo.measure.rays import RAY_KEYS
+from gsgeo.measure.rays import RAY_KEYS, RAY_PROVENANCE_KEYS
 from gsgeo.measure.schema import record_of
 from gsgeo.session import parse_rays
 from gsgeo.solve.linalg import FloatArray
@@ -152,7 +152,7 @@ def stored_rays_many(stored: Sequence[list[JSONObject]],
         return out
 
 
-_RAY_KEYS = frozenset(RAY_KEYS)
+_RAY_KEYS = frozenset(RAY_KEYS + RAY_PROVENANCE_KEYS)  # (provenance: kept, not read)
 
 
 def _number(v: JSON) -> float | None:

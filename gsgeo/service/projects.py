@@ -56,7 +56,15 @@ from gsgeo.service.measuring import (
     with_record,
     without_cyclic_gc,
 )
-from gsgeo.service.points import PointInput, check_ray_count, georef_version, point_input, rays_input
+from gsgeo.service.points import (
+    PointInput,
+    check_ray_count,
+    georef_version,
+    point_input,
+    ray_provenance,
+    rays_input,
+    with_provenance,
+)
 from gsgeo.service.validate import item_id, sigma_px, slug
 from gsgeo.solve.linalg import FloatArray
 from gsgeo.store.base import Store, Transaction
@@ -415,7 +423,8 @@ class Projects(BuildingService):
             if point_id is not None:
                 self._check_new_point_id(tx, pid, point_id)
         ctx = scene_frame(self.data_dir, p.scene)
-        pt = PointRecord(project_id=pid, id=point_id or "", rays=new.rays.to_json(), code=code,
+        pt = PointRecord(project_id=pid, id=point_id or "",
+                         rays=with_provenance(new.rays.to_json(), new.provenance), code=code,
                          description=description, excluded=excluded,
                          frame=frame_record(ctx, new.georef_version),
                          measured_by=audit.current_actor())
@@ -458,7 +467,8 @@ class Projects(BuildingService):
 
         changes keys: id, code, description, excluded (full list of 0-based indices),
         exclude_ray, restore_ray (one index), rays (replaces all rays; clears exclusions; with
-        georef_version, the scene georeference they were taken under, else the current).
+        georef_version, the scene georeference they were taken under, else the current;
+        session-JSON ray objects keep their auto / score members, typed Rays have none).
         Changing rays or exclusions re-measures; a change that leaves the point unsolvable is
         refused and nothing is written.
         """
@@ -480,7 +490,7 @@ class Projects(BuildingService):
             if changes.get("rays") is not None:
                 typed = rays_input(changes["rays"])
                 pt.measured_by = audit.current_actor()
-                pt.rays = typed.to_json()
+                pt.rays = with_provenance(typed.to_json(), ray_provenance(changes["rays"]))
                 pt.frame = frame_record(scene_frame(self.data_dir, p.scene),
                                         georef_version(changes.get("georef_version")))
                 pt.excluded = []
@@ -573,7 +583,9 @@ class Projects(BuildingService):
                     raise ConflictError(f"point '{point_id}' already exists in project '{pid}'",
                                         field=f"{at}.id")
                 typed = sp.to_rays()
-                pt = PointRecord(project_id=pid, id=point_id, rays=typed.to_json(),
+                pt = PointRecord(project_id=pid, id=point_id,
+                                 rays=with_provenance(typed.to_json(),
+                                                      [r.provenance() for r in sp.rays]),
                                  code=sp.code, description=sp.description,
                                  frame=frame_record(scene_frame(self.data_dir, p.scene)),
                                  measured_by=audit.current_actor())

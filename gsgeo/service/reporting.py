@@ -24,6 +24,7 @@ from gsgeo import __version__
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.jsontypes import JSONObject
 from gsgeo.measure.accuracy import asprs_accuracy
+from gsgeo.pointschema import provenance
 from gsgeo.service.audit import audit_page
 from gsgeo.service.measuring import json_ready
 from gsgeo.service.projects import Projects
@@ -185,15 +186,17 @@ def _ecef_row(q: PointRecord) -> JSONObject | None:
 def _point_rows(points: list[PointRecord]) -> tuple[list[JSONObject], list[JSONObject],
                                                      list[JSONObject]]:
     """(rows in the grid with POINT_COLUMNS, rows solved without a grid in ECEF, points that
-    could not be solved with their reason)."""
+    could not be solved with their reason); the solved rows with the points' provenance
+    (gsgeo.pointschema.PROVENANCE_KEYS: who measured them, rays clicked and matched)."""
     grid: list[JSONObject] = []
     ecef: list[JSONObject] = []
     failed: list[JSONObject] = []
     for q in points:
         if q.record is not None and q.record.get("easting") is not None:
-            grid.append({k: q.record.get(k) for k in POINT_COLUMNS})
+            grid.append({k: q.record.get(k) for k in POINT_COLUMNS}
+                        | provenance(q.rays, q.measured_by))
         elif q.result is not None and (row := _ecef_row(q)) is not None:
-            ecef.append(row)
+            ecef.append(row | provenance(q.rays, q.measured_by))
         else:
             failed.append({"point_id": q.id, "code": q.code,
                            "error": q.error or "not solved with the current settings"})
