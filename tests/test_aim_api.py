@@ -135,3 +135,38 @@ def test_match_of_a_bad_request_is_422_naming_the_field(served, change, field):
     r = client.post("/api/match", json=body)
     assert r.status_code == 422, r.text
     assert field in r.json()["message"], r.json()["message"]
+
+
+# /api/scenes/{scene}/views ------------------------------------------------------------------
+def _views_body(m: np.ndarray, **extra) -> dict:
+    point = (m[:3, :3] @ [1.0, 1.0, 0.0] + m[:3, 3]).tolist()
+    return {"rays": [_ray(m, [6, 1, 8], [1, 1, 0])], "point_ecef": point, "k": 3,
+            "fovy": 1.0, "width": 1280, "height": 720, **extra}
+
+
+def test_views_of_a_point_on_the_plane(served):
+    client, m = served
+    r = client.post("/api/scenes/plane/views", json=_views_body(m))
+    assert r.status_code == 200, r.text
+    views = r.json()["views"]
+    assert len(views) == 3
+    for v in views:
+        assert v["range_m"] == pytest.approx(np.linalg.norm([5, 0, 8]))
+        assert v["min_angle_deg"] > 30 and v["occluded"] is False
+        assert set(v["camera"]) == {"position", "direction", "up", "fovy", "width", "height"}
+
+
+def test_views_404_409_and_422(served):
+    client, m = served
+    assert client.post("/api/scenes/nosuch/views", json=_views_body(m)).status_code == 404
+    assert client.post("/api/scenes/hosted/views", json=_views_body(m)).status_code == 409
+    for bad, field in (({"k": 0}, "k"), ({"k": 13}, "k"), ({"rays": []}, "rays"),
+                       ({"fovy": 0}, "fovy"), ({"point_ecef": [1, 2]}, "point_ecef"),
+                       ({"width": 0}, "width")):
+        r = client.post("/api/scenes/plane/views", json=_views_body(m, **bad))
+        assert r.status_code == 422, (bad, r.text)
+        assert field in r.json()["message"]
+    body = _views_body(m)
+    body["point_ecef"] = body["rays"][0]["origin"]
+    r = client.post("/api/scenes/plane/views", json=body)
+    assert r.status_code == 422 and "point_ecef" in r.json()["message"]

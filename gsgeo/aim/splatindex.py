@@ -52,6 +52,12 @@ class SplatIndex:
     def count(self) -> int:
         return int(self.alpha.shape[0])
 
+    def subset(self, keep: np.ndarray) -> SplatIndex:
+        """The splats selected by a boolean mask or index array (same centre)."""
+        return SplatIndex(self.centre, np.ascontiguousarray(self.offsets[:, keep]),
+                          self.sigmas[keep], self.quats[keep], self.alpha[keep],
+                          self.reach[keep])
+
     @classmethod
     def from_arrays(cls, positions: np.ndarray, sigmas: np.ndarray, quats: np.ndarray,
                     alpha: np.ndarray) -> SplatIndex:

@@ -14,12 +14,13 @@ from fastapi import APIRouter, Request
 from pydantic import BaseModel, ConfigDict, Field
 
 from gsgeo.errors import InputError
+from gsgeo.limits import SIGMA_PX_MAX, SIGMA_PX_MIN
 from gsgeo.measure import Rays as RayArrays
 from gsgeo.server.api import ErrorBody
 from gsgeo.server.models import Ray, rays_of
 from gsgeo.server.scenes import SceneFolders
 from gsgeo.service import ConflictError, NotFoundError
-from gsgeo.service.aiming import depth_on_ray, match_views
+from gsgeo.service.aiming import depth_on_ray, match_views, views_for_point
 
 router = APIRouter(prefix="/api", tags=["aiming"], responses={
     404: {"model": ErrorBody, "description": "no such scene"},
@@ -131,3 +132,39 @@ class MatchAnswer(BaseModel):
 def match(body: MatchRequest) -> dict[str, Any]:
     return match_views(body.reference.model_dump(), body.target.model_dump(),
                        body.depth.model_dump())
+
+
+class ViewsRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    rays: Annotated[list[Ray], Field(min_length=1, max_length=1000)]
+    point_ecef: Vec3 = Field(description="provisional point, rendered ECEF, metres")
+    k: Annotated[int, Field(ge=1, le=12)] = 4
+    fovy: Annotated[float, Field(gt=0.01, lt=3.1, allow_inf_nan=False)] = Field(
+        description="vertical field of view of the views, radians")
+    width: Annotated[float, Field(ge=1, le=100_000, allow_inf_nan=False)]
+    height: Annotated[float, Field(ge=1, le=100_000, allow_inf_nan=False)]
+    sigma_px: Annotated[float, Field(ge=SIGMA_PX_MIN, le=SIGMA_PX_MAX, allow_inf_nan=False)] = \
+        Field(1.0, description="a-priori aiming precision, pixels (the project's)")
+
+
+class SuggestedViewModel(BaseModel):
+    camera: CameraModel
+    range_m: float
+    azimuth_deg: float = Field(description="from the point, clockwise from north, local ENU")
+    elevation_deg: float
+    min_angle_deg: float = Field(description="smallest angle to the existing rays")
+    predicted_sigma_m: float = Field(description="sqrt trace of the predicted covariance with "
+                                                 "this view's ray added")
+    occluded: bool
+
+
+class ViewsAnswer(BaseModel):
+    views: list[SuggestedViewModel]
+
+
+@router.post("/scenes/{scene}/views", response_model=ViewsAnswer,
+             summary="Suggested views of a point: most reduce its uncertainty, not occluded")
+def views(scene: SceneName, body: ViewsRequest, request: Request) -> dict[str, Any]:
+    folder = scene_folder(request, scene)
+    return views_for_point(folder, rays_of(body.rays), body.point_ecef, body.k, body.fovy,
+                           body.width, body.height, body.sigma_px)

@@ -15,6 +15,7 @@ from gsgeo.aim.depth import depth_hint
 from gsgeo.aim.images import decode_image
 from gsgeo.aim.match import View, match_feature
 from gsgeo.aim.splatindex import scene_index
+from gsgeo.aim.views import suggest_views
 from gsgeo.errors import InputError
 from gsgeo.measure import Rays
 from gsgeo.store import NotFoundError
@@ -68,3 +69,18 @@ def match_views(reference: dict[str, Any], target: dict[str, Any],
     tgt = view_of(target, "target")
     pixel = np.asarray(reference["pixel"], dtype=np.float64)
     return match_feature(ref, pixel, tgt, near, far, hint).to_json()
+
+
+def views_for_point(scene_dir: Path, rays: Rays, point: Any, k: int, fovy: float,
+                    width: float, height: float, sigma_px: float = 1.0) -> dict[str, Any]:
+    """Up to ``k`` suggested views of the provisional ``point`` (rendered ECEF) measured by
+    ``rays`` in the scene (gsgeo.aim.views.suggest_views), as the JSON of
+    POST /api/scenes/{scene}/views. The point is taken to be rendered under the first ray's
+    modelMatrix."""
+    p = np.asarray(point, dtype=np.float64).reshape(3)
+    if np.linalg.norm(p - rays.origins[0]) < 1e-3:
+        raise InputError("the point lies at the first ray's origin", field="point_ecef")
+    index = scene_index(tileset_of(scene_dir))
+    views = suggest_views(index, rays.origins, rays.directions, rays.ifov, p, k, fovy, width,
+                          height, sigma_px, rays.model_matrix(0))
+    return {"views": [v.to_json() for v in views]}

@@ -1,0 +1,229 @@
+"""Suggested viewpoints for the next ray of a point: those that most reduce its predicted
+uncertainty, not occluded, well spread around it.
+
+Candidates sit on a sphere about the provisional point at the first view's distance, on a
+grid of azimuths and elevations in the point's local east/north/up frame (rendered ECEF; a
+frame near the geocentre, i.e. a scene not placed on the Earth, takes x, y, z as e, n, u),
+each looking at the point (so the point is at its image centre) with up the local up.
+
+Each candidate's predicted covariance is gsgeo.solve's own a-priori model: the point's rays
+plus the candidate's ray through the point, solved by :func:`gsgeo.solve.core.solve_core`
+with the angular model (sigma_i = sigma_px x ifov_i x range_i), all candidates at once. The
+views are chosen greedily: each next one most reduces the trace of the covariance given the
+rays and the views already chosen, at least MIN_SEPARATION_DEG from those. A candidate is
+occluded when the splats between its camera and the point (gsgeo.aim.depth's profile of its
+ray, up to a little before the point) add up to opacity 1/2; occluded candidates are chosen
+only when no unoccluded one is left.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gsgeo.aim.camera import Camera
+from gsgeo.aim.depth import HIT_OPACITY, PIXEL_FILTER_PX, ray_profile
+from gsgeo.aim.splatindex import SplatIndex
+from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form, enu_rotation
+from gsgeo.crs.modelmatrix import apply_points, invert_affine
+from gsgeo.solve.core import solve_core
+from gsgeo.solve.linalg import FloatArray
+
+#: The candidate grid: azimuths (degrees clockwise from north) and elevations (degrees).
+AZIMUTHS_DEG = np.arange(0.0, 360.0, 15.0)
+ELEVATIONS_DEG = np.array([10.0, 25.0, 40.0, 55.0, 70.0])
+#: Two chosen views are at least this far apart (angle between their rays, degrees).
+MIN_SEPARATION_DEG = 20.0
+#: The stretch of a candidate's ray before the point not tested for occlusion: the point's
+#: own surface (a share of the range, and at least this many metres).
+POINT_CLEARANCE = 0.02
+POINT_CLEARANCE_M = 0.05
+#: The nearest range a view is put at, metres.
+MIN_RANGE_M = 1.0
+#: Occlusion tests per call at most; candidates beyond that count as occluded.
+MAX_OCCLUSION_TESTS = 48
+
+
+@dataclass(frozen=True)
+class SuggestedView:
+    """A viewpoint: its camera (rendered ECEF), range (m), azimuth and elevation from the
+    point (degrees, local ENU), the smallest angle to the existing rays (degrees), the
+    predicted sigma sqrt(trace C) (m) with this view's ray added, and whether splats hide
+    the point from it."""
+
+    camera: Camera
+    range_m: float
+    azimuth_deg: float
+    elevation_deg: float
+    min_angle_deg: float
+    predicted_sigma_m: float
+    occluded: bool
+
+    def to_json(self) -> dict[str, object]:
+        return {"camera": self.camera.to_json(), "range_m": self.range_m,
+                "azimuth_deg": self.azimuth_deg, "elevation_deg": self.elevation_deg,
+                "min_angle_deg": self.min_angle_deg,
+                "predicted_sigma_m": self.predicted_sigma_m, "occluded": self.occluded}
+
+
+def local_axes(point: FloatArray) -> FloatArray:
+    """Rows east, north, up at an ECEF point (identity near the geocentre)."""
+    p = np.asarray(point, dtype=np.float64)
+    if np.linalg.norm(p) < 1e5:
+        return np.eye(3)
+    lon, lat, _ = ecef_to_geodetic_closed_form(p)
+    return np.asarray(enu_rotation(float(lon), float(lat)), dtype=np.float64)
+
+
+def predicted_traces(origins: FloatArray, directions: FloatArray, ifov: FloatArray,
+                     extra_origins: FloatArray, extra_directions: FloatArray, extra_ifov: float,
+                     sigma_px: float) -> FloatArray:
+    """trace of the a-priori covariance (m^2) of the point of N rays (origins, unit
+    directions (N, 3), ifov (N,)) plus, for each of M candidates, one more ray (M, 3)."""
+    m = extra_origins.shape[0]
+    o = np.concatenate([np.broadcast_to(origins, (m, *origins.shape)), extra_origins[:, None]],
+                       axis=1)
+    d = np.concatenate([np.broadcast_to(directions, (m, *directions.shape)),
+                        extra_directions[:, None]], axis=1)
+    f = np.concatenate([np.broadcast_to(ifov, (m, ifov.size)), np.full((m, 1), extra_ifov)],
+                       axis=1)
+    sol = solve_core(o, d, f, sigma_px)
+    tr = np.trace(sol.normal_inverse, axis1=1, axis2=2)
+    return np.where(np.isfinite(tr) & (tr > 0), tr, np.inf)
+
+
+def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: FloatArray,
+                  ifov: FloatArray | None, point: FloatArray, k: int, fovy: float,
+                  width: float, height: float, sigma_px: float = 1.0,
+                  model_matrix: FloatArray | None = None) -> list[SuggestedView]:
+    """Up to ``k`` views of ``point`` (rendered ECEF), best first (module docstring).
+
+    origins, directions : (N, 3) the point's rays (rendered ECEF); ifov (N,) radians, NaN
+    (or None) where unknown: then the new view's own pixel angle. ``model_matrix``: the
+    tileset's modelMatrix (4, 4) the rays and point are rendered under (None: identity);
+    ``index`` None skips the occlusion test."""
+    p = np.asarray(point, dtype=np.float64)
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    f_new = 2.0 * math.tan(fovy / 2.0) / height
+    f = np.full(len(o), f_new) if ifov is None else np.asarray(ifov, dtype=np.float64).copy()
+    f[~np.isfinite(f)] = f_new
+    rng = max(float(np.linalg.norm(p - o[0])), MIN_RANGE_M)
+    enu = local_axes(p)
+    az, el = np.meshgrid(np.radians(AZIMUTHS_DEG), np.radians(ELEVATIONS_DEG))
+    az, el = az.ravel(), el.ravel()
+    back_enu = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=1)
+    back = back_enu @ enu                                    # point -> camera, unit, ECEF
+    cams = p + rng * back
+    alone = predicted_traces(o, d, f, cams, -back, f_new, sigma_px)
+    angles = np.degrees(np.arccos(np.clip(-back @ d.T, -1.0, 1.0))).min(axis=1)
+    occlusion = Occlusion(index, p, model_matrix, f_new, rng, enu[2], float(ELEVATIONS_DEG.min()))
+    chosen: list[int] = []
+    chosen_occluded: list[bool] = []
+    o_sel, d_sel, f_sel = o, d, f
+    remaining = np.isfinite(alone)                 # not chosen, apart from the chosen
+    hidden = np.zeros(len(cams), dtype=bool)       # known to be occluded
+    tested = np.zeros(len(cams), dtype=bool)
+    while len(chosen) < k and remaining.any():
+        tr = predicted_traces(o_sel, d_sel, f_sel, cams, -back, f_new, sigma_px)
+        order = [i for i in np.argsort(tr, kind="stable").tolist() if remaining[i]]
+        pick = first_visible(order, hidden, tested, occlusion, cams)
+        pick = order[0] if pick is None else pick      # all occluded: the best of them
+        chosen.append(pick)
+        chosen_occluded.append(bool(hidden[pick]))
+        remaining &= separated(back, [pick])
+        remaining[pick] = False
+        o_sel = np.vstack([o_sel, cams[pick]])
+        d_sel = np.vstack([d_sel, -back[pick]])
+        f_sel = np.append(f_sel, f_new)
+    out = []
+    up = enu[2]
+    for i, hidden in zip(chosen, chosen_occluded, strict=True):
+        cam = Camera.look_at(cams[i], p, up, fovy, width, height)
+        out.append(SuggestedView(cam, rng, float(np.degrees(az[i]) % 360.0),
+                                 float(np.degrees(el[i])), float(angles[i]),
+                                 float(math.sqrt(alone[i])), hidden))
+    return out
+
+
+def first_visible(order: list[int], hidden: np.ndarray, tested: np.ndarray,
+                  occlusion: Occlusion, cams: FloatArray) -> int | None:
+    """The first candidate of ``order`` not occluded, testing those not tested yet (their
+    results recorded in ``hidden`` and ``tested``); None when all are occluded."""
+    for i in order:
+        if not tested[i]:
+            hidden[i] = occlusion.hidden(cams[i])
+            tested[i] = True
+        if not hidden[i]:
+            return i
+    return None
+
+
+def separated(back: FloatArray, chosen: list[int]) -> np.ndarray:
+    """Candidates at least MIN_SEPARATION_DEG from every chosen one."""
+    if not chosen:
+        return np.ones(len(back), dtype=bool)
+    cos = back @ back[chosen].T
+    return np.asarray((cos < math.cos(math.radians(MIN_SEPARATION_DEG))).all(axis=1))
+
+
+class Occlusion:
+    """Whether splats hide a point from camera positions (rendered ECEF). The splats that
+    can lie between the point and a camera at the candidates' range are taken once."""
+
+    def __init__(self, index: SplatIndex | None, point: FloatArray,
+                 model_matrix: FloatArray | None, ifov: float, range_m: float,
+                 up: FloatArray, min_elevation_deg: float) -> None:
+        self.ifov = ifov
+        self.tests = 0
+        self.to_tileset = None if model_matrix is None else invert_affine(
+            np.asarray(model_matrix, dtype=np.float64))
+        self.point = self.tileset(point)
+        self.index = None if index is None else self.near_point(
+            index, range_m, up, min_elevation_deg)
+
+    def near_point(self, index: SplatIndex, range_m: float, up: FloatArray,
+                   min_elevation_deg: float) -> SplatIndex:
+        """The splats that can lie between the point and a camera ``range_m`` away at an
+        elevation of ``min_elevation_deg`` or more above the plane normal to ``up``
+        (rendered frame): within that range of the point, above that cone."""
+        scale = 1.0
+        u = np.asarray(up, dtype=np.float64)
+        if self.to_tileset is not None:
+            lin = self.to_tileset[:3, :3]
+            scale = float(abs(np.linalg.det(lin)) ** (1.0 / 3.0))
+            u = lin @ u
+        u = (u / np.linalg.norm(u)).astype(np.float32)
+        r_max = np.float32(range_m * scale)
+        p = (self.point - index.centre).astype(np.float32)
+        x, y, z = index.offsets
+        vx, vy, vz = x - p[0], y - p[1], z - p[2]
+        r = np.sqrt(vx * vx + vy * vy + vz * vz)
+        reach = index.reach + np.float32(3.0 * PIXEL_FILTER_PX * self.ifov) * r_max
+        sin_el = np.float32(math.sin(math.radians(min_elevation_deg)))
+        keep = (r < r_max + reach) & (vx * u[0] + vy * u[1] + vz * u[2]
+                                      >= (r - reach) * sin_el - reach)
+        return index.subset(keep)
+
+    def tileset(self, p: FloatArray) -> FloatArray:
+        return p if self.to_tileset is None else apply_points(self.to_tileset, p)
+
+    def hidden(self, camera_position: FloatArray) -> bool:
+        """True when the splats between the camera and the point add up to opacity 1/2
+        (or when the test budget of a call is spent)."""
+        if self.index is None:
+            return False
+        self.tests += 1
+        if self.tests > MAX_OCCLUSION_TESTS:
+            return True
+        c = self.tileset(np.asarray(camera_position, dtype=np.float64))
+        v = self.point - c
+        dist = float(np.linalg.norm(v))
+        clearance = max(POINT_CLEARANCE * dist, POINT_CLEARANCE_M)
+        if dist <= clearance:
+            return False
+        prof = ray_profile(self.index, c, v / dist, self.ifov, t_max=dist - clearance)
+        return prof.opacity >= HIT_OPACITY

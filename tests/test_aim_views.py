@@ -1,0 +1,107 @@
+"""Suggested views (gsgeo.aim.views) on synthetic splats: checked by an independent projection,
+gsgeo.solve's covariance of the rays alone, and walls that hide the point."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from aim_helpers import EAST, NORTH, UP, index_of, plane_splats, to_ecef, wall_splats
+
+from gsgeo.aim.views import MIN_SEPARATION_DEG, Occlusion, suggest_views
+from gsgeo.solve import intersect
+
+FOVY, W, H = math.radians(60.0), 1280.0, 720.0
+POINT = to_ecef([0.0, 0.0, 0.0])
+
+
+def _project(cam: dict, p: np.ndarray) -> np.ndarray:
+    """The contract's projection, written out again (not gsgeo.aim.camera)."""
+    pos, fwd, up = (np.asarray(cam[k], float) for k in ("position", "direction", "up"))
+    d = p - pos
+    right = np.cross(fwd, up)
+    f = cam["height"] / (2 * math.tan(cam["fovy"] / 2))
+    return np.array([cam["width"] / 2 + f * (d @ right) / (d @ fwd),
+                     cam["height"] / 2 - f * (d @ up) / (d @ fwd)])
+
+
+def _rays(*backs: np.ndarray, dist: float = 15.0) -> tuple[np.ndarray, np.ndarray]:
+    o = np.array([POINT + dist * b / np.linalg.norm(b) for b in backs])
+    return o, POINT - o
+
+
+def test_views_see_the_point_at_wide_angles_and_shrink_its_sigma():
+    index = index_of(plane_splats())
+    o, d = _rays(0.3 * EAST + UP, -0.6 * NORTH + 0.4 * UP)
+    ifov = np.full(2, 1e-3)
+    views = suggest_views(index, o, d, ifov, POINT, 4, FOVY, W, H)
+    assert len(views) == 4
+    cov = intersect(o, d, ifov=ifov, sigma_px=1.0).covariance
+    sigma_without = math.sqrt(np.trace(cov))
+    unit = d / np.linalg.norm(d, axis=1, keepdims=True)
+    backs = []
+    for v in views:
+        js = v.to_json()
+        cam = js["camera"]
+        xy = _project(cam, POINT)
+        assert 0 <= xy[0] <= W and 0 <= xy[1] <= H
+        assert np.linalg.norm(xy - [W / 2, H / 2]) < 1.0          # looking at the point
+        look = POINT - np.asarray(cam["position"])
+        look /= np.linalg.norm(look)
+        angles = np.degrees(np.arccos(np.clip(unit @ look, -1, 1)))
+        assert abs(angles.min() - v.min_angle_deg) < 1e-6
+        assert v.min_angle_deg > 30.0
+        assert v.predicted_sigma_m < sigma_without
+        assert abs(v.range_m - 15.0) < 1e-6
+        assert np.asarray(cam["up"]) @ UP > 0.3                      # up as local up
+        assert not v.occluded
+        backs.append(-look)
+    backs = np.array(backs)
+    cos = backs @ backs.T - 2 * np.eye(len(backs))
+    assert np.degrees(np.arccos(cos.max())) >= MIN_SEPARATION_DEG - 1e-6   # spread
+    assert np.ptp([v.azimuth_deg for v in views]) > 90.0
+
+
+def test_a_wall_hides_the_views_behind_it():
+    index = index_of(plane_splats(), wall_splats(2.0, top=8.0))
+    occ = Occlusion(index, POINT, None, 1e-3, 15.0, UP, 10.0)
+    assert occ.hidden(POINT + 15.0 * (0.9 * EAST + 0.3 * UP) / np.linalg.norm([0.9, 0.3]))
+    assert not occ.hidden(POINT + 15.0 * (-0.9 * EAST + 0.3 * UP) / np.linalg.norm([0.9, 0.3]))
+    o, d = _rays(-EAST + 0.5 * UP)
+    views = suggest_views(index, o, d, np.array([1e-3]), POINT, 6, FOVY, W, H)
+    for v in views:
+        assert not v.occluded
+        # independently: the line of sight does not cross the wall (east = 2 m, north
+        # -5..5 m, up to 8 m)
+        c = v.camera.position - POINT
+        e, n, u = c @ EAST, c @ NORTH, c @ UP
+        if e > 2.0:
+            s = 2.0 / e
+            assert not (abs(s * n) < 5.0 and s * u < 8.0), v
+    assert any(v.camera.position @ EAST - POINT @ EAST > 2.0 for v in views) or len(views) == 6
+
+
+def test_a_point_walled_in_gets_views_flagged_occluded():
+    box = [wall_splats(1.5, top=6.0), wall_splats(-1.5, top=6.0)]
+    # the same walls turned by 90 degrees: swap east and north
+    for part in list(box):
+        pos, sig, q, a = part
+        local = (pos - POINT) @ np.stack([EAST, NORTH, UP], axis=1)
+        turned = local[:, [1, 0, 2]]
+        box.append((to_ecef(turned), sig[:, [1, 0, 2]], q, a))
+    lid = plane_splats(half=2.0, height=6.0)
+    index = index_of(plane_splats(), *box, lid)
+    o, d = _rays(UP + 0.1 * EAST)
+    views = suggest_views(index, o, d, np.array([1e-3]), POINT, 3, FOVY, W, H)
+    assert len(views) == 3
+    assert all(v.occluded for v in views)
+
+
+def test_views_are_quick_after_the_first_call():
+    index = index_of(plane_splats(half=10.0, step=0.04), wall_splats(2.0))   # ~250 000 splats
+    o, d = _rays(-EAST + UP)
+    suggest_views(index, o, d, np.array([1e-3]), POINT, 4, FOVY, W, H)
+    t0 = time.perf_counter()
+    suggest_views(index, o, d, np.array([1e-3]), POINT, 4, FOVY, W, H)
+    assert time.perf_counter() - t0 < 0.5
