@@ -141,11 +141,11 @@ def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: Flo
         f_sel = np.append(f_sel, f_new)
     out = []
     up = enu[2]
-    for i, hidden in zip(chosen, chosen_occluded, strict=True):
+    for i, occluded in zip(chosen, chosen_occluded, strict=True):
         cam = Camera.look_at(cams[i], p, up, fovy, width, height)
         out.append(SuggestedView(cam, rng, float(np.degrees(az[i]) % 360.0),
                                  float(np.degrees(el[i])), float(angles[i]),
-                                 float(math.sqrt(alone[i])), hidden))
+                                 float(math.sqrt(alone[i])), occluded))
     return out
 
 
