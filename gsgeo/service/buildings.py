@@ -399,6 +399,8 @@ class BuildingService:
             was = audit.building_values(b)
             b.spec = self._checked_spec(tx, pid, dict(b.spec) | dict(changes))
             b.id = b.spec["id"]
+            if b.spec == was:  # it changes nothing: no new version, no entry in the trail
+                return building_json(self.built_in(tx, p, b), p, self.data_dir)
             if b.id != old and tx.get_building(pid, b.id) is not None:
                 raise ConflictError(f"building '{b.id}' already exists in project '{pid}'",
                                     field="id")

@@ -259,9 +259,9 @@ class Projects(BuildingService):
                         setattr(p, k, new[k])
                     p.settings_rev += 1
                     self._remeasure_all(tx, p)
-            tx.update_project(p)
             before, after = audit.changed(was, audit.project_values(p))
-            if after or before:
+            if after or before:  # (a change that changes nothing is not written)
+                tx.update_project(p)
                 kind = "settings" if any(k in after for k in SETTINGS) else "project"
                 audit.record(tx, pid, "changed", kind, None, before, after)
             return p
@@ -271,11 +271,12 @@ class Projects(BuildingService):
         e.g. after a geoid grid file was replaced."""
         with self.store.transaction() as tx:
             p = self._project(tx, pid)
+            was = p.settings_rev
             p.settings_rev += 1
-            self._remeasure_all(tx, p)
+            n = self._remeasure_stored(tx, p, scene_frame(self.data_dir, p.scene))
             tx.update_project(p)
-            audit.record(tx, pid, "re-solved", "project", None, None,
-                         {"settings_rev": p.settings_rev})
+            audit.record(tx, pid, "re-solved", "project", None, {"settings_rev": was},
+                         {"settings_rev": p.settings_rev, "remeasured_points": n})
             return p
 
     def _remeasure_all(self, tx: Transaction, p: Project) -> None:
@@ -485,6 +486,8 @@ class Projects(BuildingService):
             pt = self._point(tx, pid, point_id)
             require_version(f"point '{point_id}'", pt.version, if_match)
             was = audit.point_values(pt)
+            stored = (pt.id, pt.code, pt.description, list(pt.excluded), pt.rays, pt.frame,
+                      pt.measured_by)
             remeasure = False
             typed = None
             if changes.get("rays") is not None:
@@ -520,6 +523,9 @@ class Projects(BuildingService):
                 if pt.id != old_id and tx.get_point(pid, pt.id) is not None:
                     raise ConflictError(f"point '{pt.id}' already exists in project '{pid}'",
                                         field="id")
+            if stored == (pt.id, pt.code, pt.description, pt.excluded, pt.rays, pt.frame,
+                          pt.measured_by) and pt.solved_rev == p.settings_rev:
+                return pt  # it changes nothing: no new version, no entry in the trail
             if remeasure or pt.solved_rev != p.settings_rev:
                 self._measure_into(pt, p, strict=True, rays=typed)
             elif pt.result is not None:
@@ -699,6 +705,7 @@ class Projects(BuildingService):
             f = self._feature(tx, pid, kind, fid)
             require_version(f"{kind} '{fid}'", f.version, if_match)
             was = audit.feature_values(f)
+            stored = (f.id, list(f.point_ids), f.code, f.description)
             if changes.get("points") is not None:
                 f.point_ids = self._feature_points(tx, pid, kind, changes["points"])
             if changes.get("code") is not None:
@@ -711,6 +718,8 @@ class Projects(BuildingService):
                 if f.id != old and tx.get_feature(pid, kind, f.id) is not None:
                     raise ConflictError(f"{kind} '{f.id}' already exists in project '{pid}'",
                                         field="id")
+            if stored == (f.id, f.point_ids, f.code, f.description):
+                return f  # it changes nothing: no new version, no entry in the trail
             tx.update_feature(f, old_id=old)
             before, after = audit.changed(was, audit.feature_values(f))
             audit.record(tx, pid, "changed", kind, old, before, after)
@@ -918,10 +927,16 @@ class Projects(BuildingService):
                                  sigma_h=r.sigma_h, sigma_v=r.sigma_v) for r in rows]
         with self.store.transaction() as tx:
             self._project(tx, pid)
+            # what the import drops (replace) or overwrites (the same id), for the trail
+            given = set(ids)
+            gone = [audit.check_point_values(c) for c in tx.list_check_points(pid)
+                    if replace or c.id in given]
             replaced = tx.delete_all_check_points(pid) if replace else 0
             tx.upsert_check_points(recs)
-            audit.record(tx, pid, f"{role} points imported", "check point", None,
-                         {"replaced": replaced} if replace else None,
+            before: JSONObject | None = {"replaced": replaced} if replace else None
+            if gone:
+                before = (before or {}) | {"points": gone}
+            audit.record(tx, pid, f"{role} points imported", "check point", None, before,
                          {"ids": ids, "crs": crs.strip(), "role": role, "source": source[:300]})
         return len(recs)
 
@@ -956,9 +971,11 @@ class Projects(BuildingService):
     def delete_all_check_points(self, pid: str) -> int:
         with self.store.transaction() as tx:
             self._project(tx, pid)
+            gone = [audit.check_point_values(c) for c in tx.list_check_points(pid)]
             n = tx.delete_all_check_points(pid)
             if n:
-                audit.record(tx, pid, "deleted", "check point", None, {"count": n}, None)
+                audit.record(tx, pid, "deleted", "check point", None,
+                             {"count": n, "points": gone}, None)
             return n
 
     def accuracy(self, pid: str, role: str = "check") -> JSONObject:
