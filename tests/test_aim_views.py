@@ -65,7 +65,7 @@ def test_views_see_the_point_at_wide_angles_and_shrink_its_sigma():
 
 def test_a_wall_hides_the_views_behind_it():
     index = index_of(plane_splats(), wall_splats(2.0, top=8.0))
-    occ = Occlusion(index, POINT, None, 1e-3, 15.0, UP, 10.0)
+    occ = Occlusion(index, POINT, None, 1e-3)
     assert occ.hidden(POINT + 15.0 * (0.9 * EAST + 0.3 * UP) / np.linalg.norm([0.9, 0.3]))
     assert not occ.hidden(POINT + 15.0 * (-0.9 * EAST + 0.3 * UP) / np.linalg.norm([0.9, 0.3]))
     o, d = _rays(-EAST + 0.5 * UP)

@@ -83,20 +83,23 @@ def near_ray(index: SplatIndex, origin: FloatArray, direction: FloatArray,
              ifov: float | None, t_max: float | None = None) -> np.ndarray:
     """Indices of the splats whose reach (EXTENT_SIGMAS, plus the pixel filter) touches the
     ray from ``origin`` along unit ``direction`` (tileset ECEF), in front of the origin and,
-    with ``t_max``, before that distance."""
-    o = (np.asarray(origin, dtype=np.float64) - index.centre).astype(np.float32)
+    with ``t_max``, before that distance. The index's blocks the ray misses are skipped."""
+    o64 = np.asarray(origin, dtype=np.float64) - index.centre
+    spread = 3.0 * PIXEL_FILTER_PX * ifov if ifov else 0.0
+    cand = index.gather(index.blocks_near_ray(o64, direction, spread, t_max))
+    o = o64.astype(np.float32)
     d = np.asarray(direction, dtype=np.float32)
-    x, y, z = index.offsets
+    x, y, z = index.offsets[:, cand]
     vx, vy, vz = x - o[0], y - o[1], z - o[2]
     t = vx * d[0] + vy * d[1] + vz * d[2]
     d2 = vx * vx + vy * vy + vz * vz - t * t
-    reach = index.reach
+    reach = index.reach[cand]
     if ifov:
-        reach = reach + np.float32(3.0 * PIXEL_FILTER_PX * ifov) * np.maximum(t, 0)
+        reach = reach + np.float32(spread) * np.maximum(t, 0)
     keep = (d2 < reach * reach) & (t > -reach)
     if t_max is not None:
         keep &= t < t_max + reach
-    return np.flatnonzero(keep)
+    return cand[keep]
 
 
 def ray_profile(index: SplatIndex, origin: FloatArray, direction: FloatArray,

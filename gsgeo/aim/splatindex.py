@@ -16,6 +16,7 @@ import math
 import os
 import threading
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +27,31 @@ from gsgeo.tiles.splats import matrix_to_quat, quat_multiply
 
 #: A splat reaches this many standard deviations from its centre (3DGS renderers cut there).
 EXTENT_SIGMAS = 3.0
+#: Splats per block of the coarse search structure.
+BLOCK = 128
+#: The share of splats, the largest, kept in blocks of their own.
+BIG_QUANTILE = 0.95
 #: Tilesets kept in memory at once (least recently used dropped first).
 CACHE_SIZE = 2
+
+
+def morton_order(points: np.ndarray) -> np.ndarray:
+    """The permutation (N,) sorting points (N, 3) along a Z-order curve over their bounding
+    box (10 bits per axis): neighbours in space end up near each other in the arrays."""
+    if points.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo = points.min(axis=0)
+    span = np.maximum(points.max(axis=0) - lo, 1e-9)
+    q = np.clip((points - lo) / span * 1023.0, 0, 1023).astype(np.uint64)
+    code = np.zeros(points.shape[0], dtype=np.uint64)
+    for axis in range(3):
+        v = q[:, axis]
+        v = (v | (v << np.uint64(16))) & np.uint64(0x030000FF)
+        v = (v | (v << np.uint64(8))) & np.uint64(0x0300F00F)
+        v = (v | (v << np.uint64(4))) & np.uint64(0x030C30C3)
+        v = (v | (v << np.uint64(2))) & np.uint64(0x09249249)
+        code |= v << np.uint64(axis)
+    return np.argsort(code, kind="stable")
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,11 +76,65 @@ class SplatIndex:
     def count(self) -> int:
         return int(self.alpha.shape[0])
 
-    def subset(self, keep: np.ndarray) -> SplatIndex:
-        """The splats selected by a boolean mask or index array (same centre)."""
-        return SplatIndex(self.centre, np.ascontiguousarray(self.offsets[:, keep]),
-                          self.sigmas[keep], self.quats[keep], self.alpha[keep],
-                          self.reach[keep])
+    @cached_property
+    def blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        """Boxes (lo, hi), each (B, 3) offsets, of consecutive runs of BLOCK splats (reach
+        included): the splats are stored in Z-order, so each run is compact in space and a
+        query first skips the boxes it cannot touch."""
+        n = self.count
+        starts = np.arange(0, n, BLOCK)
+        if n == 0:
+            return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
+        lo = np.stack([np.minimum.reduceat(self.offsets[k] - self.reach, starts)
+                       for k in range(3)], axis=1)
+        hi = np.stack([np.maximum.reduceat(self.offsets[k] + self.reach, starts)
+                       for k in range(3)], axis=1)
+        return lo, hi
+
+    def gather(self, blocks: np.ndarray) -> np.ndarray:
+        """The splat indices (sorted) of the given block numbers."""
+        b = np.asarray(blocks, dtype=np.int64)
+        if b.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        idx = (b[:, None] * BLOCK + np.arange(BLOCK)[None, :]).ravel()
+        return idx[idx < self.count]
+
+    @cached_property
+    def block_spheres(self) -> tuple[np.ndarray, np.ndarray]:
+        """Centres (B, 3) and radii (B,) of the spheres around the blocks' boxes."""
+        lo, hi = self.blocks
+        mid = (lo.astype(np.float64) + hi) / 2.0
+        half = hi.astype(np.float64) - mid
+        return mid, np.sqrt(np.einsum("ij,ij->i", half, half))
+
+    def blocks_near_ray(self, origin: np.ndarray, direction: np.ndarray, spread: float,
+                        t_max: float | None = None) -> np.ndarray:
+        """Block numbers whose box, widened by ``spread`` metres per metre of distance from
+        the origin, the ray (offset origin, unit direction) passes through in front of the
+        origin (and before ``t_max``)."""
+        lo, hi = self.blocks
+        o = np.asarray(origin, dtype=np.float64)
+        d = np.asarray(direction, dtype=np.float64)
+        if spread > 0:
+            mid, radius = self.block_spheres
+            rel = mid - o
+            grow = (spread * (np.sqrt(np.einsum("ij,ij->i", rel, rel)) + radius))[:, None]
+            lo, hi = lo - grow, hi + grow
+        inv = 1.0 / np.where(np.abs(d) < 1e-12, 1e-12, d)
+        t1, t2 = (lo - o) * inv, (hi - o) * inv
+        t_in = np.minimum(t1, t2).max(axis=1)
+        t_out = np.maximum(t1, t2).min(axis=1)
+        hit = (t_out >= np.maximum(t_in, 0.0))
+        if t_max is not None:
+            hit &= t_in <= t_max
+        return np.flatnonzero(hit)
+
+    def blocks_near_point(self, point: np.ndarray, radius: float) -> np.ndarray:
+        """Block numbers whose box comes within ``radius`` metres of a point (offsets)."""
+        lo, hi = self.blocks
+        p = np.asarray(point, dtype=np.float64)
+        gap = np.maximum(np.maximum(lo - p, p - hi), 0.0)
+        return np.flatnonzero((gap * gap).sum(axis=1) <= radius * radius)
 
     @classmethod
     def from_arrays(cls, positions: np.ndarray, sigmas: np.ndarray, quats: np.ndarray,
@@ -71,6 +149,13 @@ class SplatIndex:
         ok = np.isfinite(p).all(axis=1) & np.isfinite(s).all(axis=1) & (s > 0).all(axis=1) \
             & np.isfinite(qn) & (qn > 0) & np.isfinite(a) & (a > 0)
         p, s, q, a, qn = p[ok], s[ok], q[ok], a[ok], qn[ok]
+        # Z-order, the largest splats apart at the end: they would swell every block's box
+        big = EXTENT_SIGMAS * s.max(axis=1, initial=0.0) > np.quantile(
+            EXTENT_SIGMAS * s.max(axis=1, initial=0.0), BIG_QUANTILE) if len(s) else \
+            np.zeros(0, dtype=bool)
+        order = np.concatenate([np.flatnonzero(~big)[morton_order(p[~big])],
+                                np.flatnonzero(big)[morton_order(p[big])]])
+        p, s, q, a, qn = p[order], s[order], q[order], a[order], qn[order]
         centre = p.mean(axis=0) if p.shape[0] else np.zeros(3)
         offsets = np.ascontiguousarray((p - centre).T.astype(np.float32))
         return cls(centre, offsets, s, (q / qn[:, None]).astype(np.float32),

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gsgeo.aim.camera import Camera
-from gsgeo.aim.depth import HIT_OPACITY, PIXEL_FILTER_PX, ray_profile
+from gsgeo.aim.depth import HIT_OPACITY, ray_profile
 from gsgeo.aim.splatindex import SplatIndex
 from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form, enu_rotation
 from gsgeo.crs.modelmatrix import apply_points, invert_affine
@@ -120,7 +120,7 @@ def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: Flo
     cams = p + rng * back
     alone = predicted_traces(o, d, f, cams, -back, f_new, sigma_px)
     angles = np.degrees(np.arccos(np.clip(-back @ d.T, -1.0, 1.0))).min(axis=1)
-    occlusion = Occlusion(index, p, model_matrix, f_new, rng, enu[2], float(ELEVATIONS_DEG.min()))
+    occlusion = Occlusion(index, p, model_matrix, f_new)
     chosen: list[int] = []
     chosen_occluded: list[bool] = []
     o_sel, d_sel, f_sel = o, d, f
@@ -171,42 +171,16 @@ def separated(back: FloatArray, chosen: list[int]) -> np.ndarray:
 
 
 class Occlusion:
-    """Whether splats hide a point from camera positions (rendered ECEF). The splats that
-    can lie between the point and a camera at the candidates' range are taken once."""
+    """Whether splats hide a point from camera positions (rendered ECEF)."""
 
     def __init__(self, index: SplatIndex | None, point: FloatArray,
-                 model_matrix: FloatArray | None, ifov: float, range_m: float,
-                 up: FloatArray, min_elevation_deg: float) -> None:
+                 model_matrix: FloatArray | None, ifov: float) -> None:
+        self.index = index
         self.ifov = ifov
         self.tests = 0
         self.to_tileset = None if model_matrix is None else invert_affine(
             np.asarray(model_matrix, dtype=np.float64))
         self.point = self.tileset(point)
-        self.index = None if index is None else self.near_point(
-            index, range_m, up, min_elevation_deg)
-
-    def near_point(self, index: SplatIndex, range_m: float, up: FloatArray,
-                   min_elevation_deg: float) -> SplatIndex:
-        """The splats that can lie between the point and a camera ``range_m`` away at an
-        elevation of ``min_elevation_deg`` or more above the plane normal to ``up``
-        (rendered frame): within that range of the point, above that cone."""
-        scale = 1.0
-        u = np.asarray(up, dtype=np.float64)
-        if self.to_tileset is not None:
-            lin = self.to_tileset[:3, :3]
-            scale = float(abs(np.linalg.det(lin)) ** (1.0 / 3.0))
-            u = lin @ u
-        u = (u / np.linalg.norm(u)).astype(np.float32)
-        r_max = np.float32(range_m * scale)
-        p = (self.point - index.centre).astype(np.float32)
-        x, y, z = index.offsets
-        vx, vy, vz = x - p[0], y - p[1], z - p[2]
-        r = np.sqrt(vx * vx + vy * vy + vz * vz)
-        reach = index.reach + np.float32(3.0 * PIXEL_FILTER_PX * self.ifov) * r_max
-        sin_el = np.float32(math.sin(math.radians(min_elevation_deg)))
-        keep = (r < r_max + reach) & (vx * u[0] + vy * u[1] + vz * u[2]
-                                      >= (r - reach) * sin_el - reach)
-        return index.subset(keep)
 
     def tileset(self, p: FloatArray) -> FloatArray:
         return p if self.to_tileset is None else apply_points(self.to_tileset, p)
