@@ -170,3 +170,20 @@ def test_views_404_409_and_422(served):
     body["point_ecef"] = body["rays"][0]["origin"]
     r = client.post("/api/scenes/plane/views", json=body)
     assert r.status_code == 422 and "point_ecef" in r.json()["message"]
+
+
+def test_the_splats_are_read_once_per_tileset_version(served, tmp_path):
+    import shutil
+
+    from gsgeo.aim.splatindex import scene_index
+
+    client, _ = served
+    src = client.app.state.config.data_dir / "scenes" / "plane"
+    copy = tmp_path / "plane"
+    shutil.copytree(src, copy)
+    first = scene_index(copy / "tileset.json")
+    assert scene_index(copy / "tileset.json") is first
+    ts = copy / "tileset.json"
+    ts.write_text(ts.read_text() + "\n")          # a regenerated tileset.json
+    again = scene_index(ts)
+    assert again is not first and again.count == first.count
