@@ -15,6 +15,7 @@ point it writes, unchecked (a re-measure writes derived state of points it has j
 
 from __future__ import annotations
 
+import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import AbstractContextManager
@@ -31,6 +32,24 @@ from gsgeo.store.records import (
     Project,
 )
 from gsgeo.store.surfaces import BuildingSurface
+
+#: The measured_at text a time filter compares: an ISO 8601 instant with its time zone (Z or
+#: +-HH[:]MM), at most microseconds; any other text (one without a zone above all) names no
+#: instant and passes no time filter, in every backend (their SQL uses this same pattern,
+#: anchored). ASCII digits only.
+INSTANT = (r"[0-9]{4}-[0-9]{2}-[0-9]{2}T[0-9]{2}:[0-9]{2}:[0-9]{2}(\.[0-9]{1,6})?"
+           r"(Z|[+-][0-9]{2}:?[0-9]{2})")
+
+
+def instant(text: object) -> datetime | None:
+    """The (timezone-aware) instant a measured_at text names, None when it names none
+    (see INSTANT)."""
+    if not isinstance(text, str) or re.fullmatch(INSTANT, text) is None:
+        return None
+    try:
+        return datetime.fromisoformat(text)
+    except ValueError:  # e.g. month 13
+        return None
 
 
 @dataclass(frozen=True)
@@ -54,11 +73,8 @@ class PointFilter:
         if self.code is not None and record.get("code") != self.code:
             return False
         if self.measured_from is not None or self.measured_to is not None:
-            try:
-                t = datetime.fromisoformat(str(record.get("measured_at")))
-            except ValueError:
-                return False
-            if t.tzinfo is None:
+            t = instant(record.get("measured_at"))
+            if t is None:
                 return False
             if (self.measured_from is not None and t < self.measured_from) or \
                     (self.measured_to is not None and t > self.measured_to):

@@ -134,6 +134,19 @@ MIGRATIONS: list[str] = [
     );
     ALTER TABLE gsgeo_schema ADD COLUMN views INTEGER NOT NULL DEFAULT 0;
     """,
+    # 4: a text read as a timestamptz, NULL where it names none: a text of an instant's form
+    # may still be out of range (month 13), and a failed cast would make a whole filter or
+    # view fail (callers first check the form, gsgeo.store.base.INSTANT)
+    """
+    CREATE FUNCTION gsgeo_timestamptz(t TEXT) RETURNS timestamptz
+    LANGUAGE plpgsql STABLE AS $$
+    BEGIN
+        RETURN t::timestamptz;
+    EXCEPTION WHEN others THEN
+        RETURN NULL;
+    END
+    $$;
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

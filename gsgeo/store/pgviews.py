@@ -21,6 +21,7 @@ import re
 from psycopg import sql
 
 from gsgeo.pointschema import BUILDING_TYPES, RECORD_KEYS
+from gsgeo.store.base import INSTANT
 
 #: Record columns that are text (measured_at becomes a timestamptz) and integers; the rest
 #: are double precision.
@@ -29,12 +30,12 @@ TEXT_KEYS = frozenset({"point_id", "code", "description", "height_type", "vertic
 INT_KEYS = frozenset({"n_rays"})
 KINDS = ("points", "lines", "polygons", "buildings")
 #: The version of the views this module makes: 2 added the points' provenance columns and
-#: the buildings view.
-VIEWS_VERSION = 2
+#: the buildings view, 3 reads measured_at as every backend's time filters do.
+VIEWS_VERSION = 3
 
-# An ISO 8601 instant with a zone offset, which alone is cast (a bad text gives NULL, not an
-# error that would make the whole view unreadable)
-INSTANT_RE = r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?(Z|[+-]\d\d:?\d\d)$"
+# An ISO 8601 instant with a zone offset (gsgeo.store.base.INSTANT), which alone is cast (a
+# bad text gives NULL, not an error that would make the whole view unreadable)
+INSTANT_RE = f"^{INSTANT}$"
 
 
 def view_name(pid: str, kind: str) -> str:
@@ -67,7 +68,7 @@ def _column(key: str, kind: str | None = None) -> sql.Composable:
         expr = sql.SQL("CASE WHEN jsonb_typeof(r->{k}) = 'number' THEN {t}::float8::integer END"
                        ).format(k=sql.Literal(key), t=text)
     elif kind == "instant":
-        expr = sql.SQL("CASE WHEN {t} ~ {re} THEN {t}::timestamptz END").format(
+        expr = sql.SQL("CASE WHEN {t} ~ {re} THEN gsgeo_timestamptz({t}) END").format(
             t=text, re=sql.Literal(INSTANT_RE))
     else:
         expr = sql.SQL("CASE WHEN jsonb_typeof(r->{k}) = 'number' THEN {t}::float8 END").format(

@@ -32,7 +32,7 @@ from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSON
 from gsgeo.pointschema import RECORD_KEYS
 from gsgeo.store.accountrecords import AuditEntry, UserRecord
-from gsgeo.store.base import PointFilter, PointRow, Store, Transaction, result_rows
+from gsgeo.store.base import INSTANT, PointFilter, PointRow, Store, Transaction, result_rows
 from gsgeo.store.pgmigrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.pgviews import VIEWS_VERSION, create_views, drop_views
 from gsgeo.store.records import (
@@ -128,8 +128,8 @@ def _point_where(pid: str, where: PointFilter | None) -> tuple[sql.Composable, l
         parts.append(sql.SQL("code = %s"))  # the column is kept equal to the result's code
         args.append(where.code)
     when = sql.SQL("(CASE WHEN result->>'measured_at' ~ %s"
-                   " THEN (result->>'measured_at')::timestamptz END)")
-    instant = r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?(Z|[+-]\d\d:?\d\d)$"
+                   " THEN gsgeo_timestamptz(result->>'measured_at') END)")
+    instant = f"^{INSTANT}$"
     if where.measured_from is not None:
         parts.append(sql.SQL("{} >= %s").format(when))
         args += [instant, where.measured_from.astimezone(UTC)]

@@ -22,7 +22,7 @@ from gsgeo.errors import GsgeoError
 from gsgeo.jsontypes import JSON
 from gsgeo.pointschema import RECORD_KEYS
 from gsgeo.store.accountrecords import AuditEntry, UserRecord
-from gsgeo.store.base import PointFilter, PointRow, Store, Transaction, result_rows
+from gsgeo.store.base import PointFilter, PointRow, Store, Transaction, instant, result_rows
 from gsgeo.store.migrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.records import (
     BuildingRecord,
@@ -67,15 +67,20 @@ def _loads(text: str | None) -> JSON:
 RECORD_SQL = "json_extract(result, " + ", ".join(f"'$.{k}'" for k in RECORD_KEYS) + ")"
 
 
-def _instant(t: datetime, up: bool) -> str:
-    """A bound for SQLite's julianday(): UTC to the millisecond (SQLite reads no finer),
-    rounded up (``up``) or down so that an inclusive bound includes nothing beyond it."""
-    u = t.astimezone(UTC)
-    rest = u.microsecond % 1000
-    u -= timedelta(microseconds=rest)
-    if up and rest and u.year < 9999:  # (nothing is measured in year 9999's last second)
-        u += timedelta(milliseconds=1)
-    return u.strftime("%Y-%m-%dT%H:%M:%S.") + f"{u.microsecond // 1000:03d}Z"
+EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+
+def micros(t: datetime) -> int:
+    """Microseconds since 1970-01-01T00:00Z of a timezone-aware instant (exact)."""
+    return (t - EPOCH) // timedelta(microseconds=1)
+
+
+def instant_micros(text: object) -> int | None:
+    """SQL function ``gsgeo_instant``: the instant a measured_at text names
+    (gsgeo.store.base.instant, the rule of every backend) in microseconds since 1970, NULL
+    when it names none (SQLite's own julianday() would read a text without a zone as UTC)."""
+    t = instant(text)
+    return None if t is None else micros(t)
 
 
 def _point_where(pid: str, where: PointFilter | None) -> tuple[str, list[object]]:
@@ -88,13 +93,13 @@ def _point_where(pid: str, where: PointFilter | None) -> tuple[str, list[object]
     if where.code is not None:
         sql += " AND code = ?"  # the column is kept equal to the result's code
         args.append(where.code)
-    when = "julianday(json_extract(result, '$.measured_at'))"
+    when = "gsgeo_instant(json_extract(result, '$.measured_at'))"
     if where.measured_from is not None:
-        sql += f" AND {when} >= julianday(?)"
-        args.append(_instant(where.measured_from, up=True))
+        sql += f" AND {when} >= ?"
+        args.append(micros(where.measured_from))
     if where.measured_to is not None:
-        sql += f" AND {when} <= julianday(?)"
-        args.append(_instant(where.measured_to, up=False))
+        sql += f" AND {when} <= ?"
+        args.append(micros(where.measured_to))
     if where.box is not None:
         kx, ky, x0, y0, x1, y1 = where.box
         if kx not in RECORD_KEYS or ky not in RECORD_KEYS:
@@ -479,6 +484,7 @@ class SQLiteStore(Store):
             con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000,
                                   isolation_level=None, check_same_thread=False)
             con.row_factory = sqlite3.Row
+            con.create_function("gsgeo_instant", 1, instant_micros, deterministic=True)
             mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
             if mode.lower() != "wal":
                 raise StoreError(f"cannot switch to WAL journal mode (got {mode})",
