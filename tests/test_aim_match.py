@@ -96,6 +96,21 @@ def test_the_match_lies_within_0_2_px_of_the_truth(noise, angle):
         assert res.score > 0.9 and res.second < res.score
 
 
+def test_a_depth_hint_far_off_the_feature_is_swept_past(noise):
+    """The hint lies 4 m behind the plane (as on a thin object's edge, with the background
+    behind it): the patch is warped for each depth between near and far, so the oblique view
+    still matches where the feature is."""
+    tgt = camera(oblique(55.0), [0.4, -0.3, 0.0])
+    ref_img, tgt_img = render(REF, noise), render(tgt, noise)
+    for click in CLICKS:
+        px, t = truth(REF, tgt, click)
+        res = match_feature(View(ref_img, np.zeros(2), REF), click,
+                            View(tgt_img, np.zeros(2), tgt), t - 1.0, t + 5.0, t + 4.0)
+        assert res.ok, res.reason
+        assert np.linalg.norm(res.pixel - px) < 0.2
+        assert abs(res.depth_m - t) < 0.02
+
+
 def test_cropped_images_are_placed_by_their_origin(noise):
     tgt = camera(oblique(40.0), [0.4, -0.3, 0.0])
     ref_img, tgt_img = render(REF, noise), render(tgt, noise)

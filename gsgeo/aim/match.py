@@ -10,7 +10,10 @@ segment (OpenCV).
    surface's true orientation is unknown from one view; this plane is exact for a surface
    seen square-on, which is what an operator picks a view for, and it carries the view
    change's rotation, scale and foreshortening into the patch, which is what makes oblique
-   views match (a plain patch at 60 degrees scores far lower, see the tests).
+   views match (a plain patch at 60 degrees scores far lower, see the tests). When near..far
+   is wide (a click on a thin object's edge, its background behind) the hint may be far from
+   the feature, so the patch is warped for a sweep of depths from near to far and each warp
+   scores the part of the segment its depth projects to.
 3. The target image is resampled into a strip along the segment (``cv2.warpAffine``), the
    warped patch in the same frame (``cv2.warpPerspective``), so the search is the band of
    BAND_PX either side of the line, and ``cv2.matchTemplate`` (normalised cross-correlation,
@@ -53,6 +56,10 @@ NEIGHBOURHOOD_PX = max(3, HALF_PX // 2)
 MIN_TEXTURE = 2.0
 #: Fraction of the near..far length the matched depth may lie beyond the segment (sub-pixel).
 DEPTH_SLACK = 0.02
+#: The plane sweep: a new warp of the patch each time the depth grows by this factor, and
+#: at most this many warps per match.
+SWEEP_RATIO = 1.05
+MAX_TEMPLATES = 24
 #: Iterations and step (px) at which the sub-pixel alignment stops.
 ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4)
 
@@ -163,6 +170,49 @@ def refine(templ: np.ndarray, strip: np.ndarray, col: int, row: int, ds: float, 
     return ds, dw
 
 
+def depth_samples(near: float, far: float, depth: float) -> FloatArray:
+    """Depths (metres along the reference ray) at which the patch is warped: the depth hint
+    alone when near..far changes the view's scale by less than SWEEP_RATIO, else a
+    geometric series from near to far (a plane sweep; at most MAX_TEMPLATES) with the hint
+    in place of its nearest member."""
+    lo = max(near, far / 50.0, 1e-3)
+    if far <= lo * SWEEP_RATIO:
+        return np.array([depth])
+    n = int(min(MAX_TEMPLATES, math.ceil(math.log(far / lo) / math.log(SWEEP_RATIO)) + 1))
+    out = np.asarray(np.geomspace(lo, far, n), dtype=np.float64)
+    out[int(np.argmin(np.abs(np.log(out / max(depth, 1e-3)))))] = depth
+    return out
+
+
+def warped_patch(ref: View, tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
+                 ray: FloatArray, t: float, click: FloatArray) -> tuple[np.ndarray, float] | str:
+    """The reference patch around the click as the target view would show it in the strip
+    frame if the feature lay at depth ``t`` on a plane parallel to the reference image
+    (2 HALF_PX + 1 square, the click at its centre), and the strip column of that centre;
+    a decline reason instead when the plane or patch does not map."""
+    h = HALF_PX
+    hom = plane_homography(ref.camera, tgt.camera, origin + t * ray, -ref.camera.direction,
+                           ref.origin, tgt.origin, click, 2.0 * h)
+    if hom is None:
+        return "outside the view: the depth hint's plane is not seen by both views"
+    strip_from_ref = strip_from_target @ hom
+    cx, cy = click - ref.origin - 0.5
+    c = strip_from_ref @ np.array([cx, cy, 1.0])
+    if abs(c[2]) < 1e-12:
+        return "outside the view: the click does not map into the target view"
+    c = c[:2] / c[2]
+    shift = np.array([[1.0, 0.0, c[0] - h], [0.0, 1.0, c[1] - h], [0.0, 0.0, 1.0]])
+    templ = cv2.warpPerspective(ref.image, np.linalg.inv(strip_from_ref) @ shift,
+                                (2 * h + 1, 2 * h + 1),
+                                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+    if float(templ.min()) < 0.0:
+        return "outside the view: the warped patch reaches beyond the reference image"
+    if float(templ.std()) < MIN_TEXTURE:
+        return "weak: no texture around the click to match"
+    return templ, float(c[0])
+
+
 def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: float,
                   depth: float) -> MatchResult:
     """The click of the reference view found in the target view (module docstring).
@@ -199,7 +249,7 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     length = float(np.linalg.norm(p1 - p0))
     u = (p1 - p0) / length if length > 1e-6 else np.array([1.0, 0.0])
     v = np.array([-u[1], u[0]])
-    # strip frame: (s, w) -> image p0 + (s - h - 1) u + (w - h - b - 1) v
+    # strip frame: (x, y) -> image p0 + (x - h - ext) u + (y - h - b - ext) v
     ext = 1                                             # one more pixel all round for the fit
     a = np.array([[u[0], v[0], p0[0] - (h + ext) * u[0] - (h + b + ext) * v[0]],
                   [u[1], v[1], p0[1] - (h + ext) * u[1] - (h + b + ext) * v[1]],
@@ -209,29 +259,28 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     strip = cv2.warpAffine(tgt.image, a[:2], (strip_w, strip_h),
                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                            borderMode=cv2.BORDER_REPLICATE)
-    # the reference patch warped into the strip frame by the depth hint's plane
-    hom = plane_homography(ref.camera, tgt.camera, o + depth * d, -ref.camera.direction,
-                           ref.origin, tgt.origin,
-                           click, 2.0 * h)
-    if hom is None:
-        return declined("outside the view: the depth hint's plane is not seen by both views")
-    strip_from_ref = np.linalg.inv(a) @ hom
-    c = strip_from_ref @ np.array([cx, cy, 1.0])
-    if abs(c[2]) < 1e-12:
-        return declined("outside the view: the click does not map into the target view")
-    c = c[:2] / c[2]
-    shift = np.array([[1.0, 0.0, c[0] - h], [0.0, 1.0, c[1] - h], [0.0, 0.0, 1.0]])
-    to_ref = np.linalg.inv(strip_from_ref) @ shift
-    size = (2 * h + 1, 2 * h + 1)
-    templ = cv2.warpPerspective(ref.image, to_ref, size,
-                                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
-    if float(templ.min()) < 0.0:
-        return declined("outside the view: the warped patch reaches beyond the reference "
-                        "image")
-    if float(templ.std()) < MIN_TEXTURE:
-        return declined("weak: no texture around the click to match")
-    score = cv2.matchTemplate(strip, templ, cv2.TM_CCOEFF_NORMED)
+    # the patch warped for each depth of the sweep; each scores the columns nearest to it
+    # (a depth whose plane maps the patch beyond the reference image, e.g. one very close to
+    # the target camera, is left out; its columns go to the nearest depth that maps)
+    templates, columns, reasons = [], [], []
+    for t in depth_samples(near, far, depth).tolist():
+        got = warped_patch(ref, tgt, np.linalg.inv(a), o, d, t, click)
+        if isinstance(got, str):
+            reasons.append(got)
+            continue
+        templates.append(got[0])
+        columns.append(got[1] - h)                      # score column of that depth
+    if not templates:
+        return declined(reasons[0])
+    n_cols = n_s + 2 * ext
+    owner = np.abs(np.arange(n_cols)[:, None] - np.array(columns)[None, :]).argmin(axis=1)
+    score = np.full((2 * (b + ext) + 1, n_cols), -1.0, dtype=np.float32)
+    for j in np.unique(owner).tolist():
+        cols = np.flatnonzero(owner == j)
+        c0, c1 = int(cols[0]), int(cols[-1])
+        part = cv2.matchTemplate(strip[:, c0:c1 + 2 * h + 1], templates[j],
+                                 cv2.TM_CCOEFF_NORMED)
+        score[:, c0:c1 + 1] = np.where(owner[c0:c1 + 1] == j, part, score[:, c0:c1 + 1])
     score = np.nan_to_num(np.clip(score, -1.0, 1.0), nan=-1.0)
     # rows: offsets -(b+ext)..(b+ext) from the line; columns: -ext..n_s-1+ext along it
     inner = score[ext:ext + 2 * b + 1, ext:ext + n_s]
@@ -256,6 +305,13 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     rw, rs = w_pk + ext, s_pk + ext
     ds = parabola_offset(score[rw, rs - 1], score[rw, rs], score[rw, rs + 1])
     dw = parabola_offset(score[rw - 1, rs], score[rw, rs], score[rw + 1, rs])
+    # the sub-pixel alignment with the patch warped for the depth the peak itself lies at
+    templ = templates[int(owner[rs])]
+    coarse = p0 + (s_pk + ds) * u + (w_pk - b + dw) * v + tgt.origin + 0.5
+    t_pk = closest_on_first(o, d, tgt.camera.position, tgt.camera.pick_ray(coarse)[0])
+    if math.isfinite(t_pk) and t_pk > 0:
+        got = warped_patch(ref, tgt, np.linalg.inv(a), o, d, t_pk, click)
+        templ = templ if isinstance(got, str) else got[0]
     ds, dw = refine(templ, strip, rs, rw, ds, dw)
     s, w = s_pk + ds, w_pk - b + dw
     img_pt = p0 + s * u + w * v
