@@ -187,3 +187,22 @@ def test_the_splats_are_read_once_per_tileset_version(served, tmp_path):
     ts.write_text(ts.read_text() + "\n")          # a regenerated tileset.json
     again = scene_index(ts)
     assert again is not first and again.count == first.count
+
+
+def test_a_scene_whose_splats_cannot_be_read_is_409_not_500(served, tmp_path):
+    client, m = served
+    data = client.app.state.config.data_dir
+    broken = data / "scenes" / "broken"
+    broken.mkdir(exist_ok=True)
+    (broken / "tileset.json").write_text('{"asset": {"version": "1.1"}, "root": {"geometricError'
+                                         '": 0, "content": {"uri": "t.glb"}}}')
+    (broken / "t.glb").write_bytes(b"glTF\x02\x00\x00\x00" + b"\x00" * 30)
+    notjson = data / "scenes" / "notjson"
+    notjson.mkdir(exist_ok=True)
+    (notjson / "tileset.json").write_text("{ this is not json")
+    for name in ("broken", "notjson"):
+        for path, body in ((f"/api/scenes/{name}/depth", {"ray": _ray(m, [0, 0, 2], [0, 0, 0])}),
+                           (f"/api/scenes/{name}/views", _views_body(m))):
+            r = client.post(path, json=body)
+            assert r.status_code == 409, (name, path, r.text)
+            assert "cannot be read" in r.json()["message"]

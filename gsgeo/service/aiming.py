@@ -5,6 +5,8 @@ ECEF (metres), as the viewer's rays carry them; each ray's modelMatrix maps to t
 
 from __future__ import annotations
 
+import struct
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -14,11 +16,11 @@ from gsgeo.aim.camera import Camera
 from gsgeo.aim.depth import depth_hint
 from gsgeo.aim.images import decode_image
 from gsgeo.aim.match import View, match_feature
-from gsgeo.aim.splatindex import scene_index
+from gsgeo.aim.splatindex import SplatIndex, scene_index
 from gsgeo.aim.views import suggest_views
-from gsgeo.errors import InputError
+from gsgeo.errors import GsgeoError, InputError
 from gsgeo.measure import Rays
-from gsgeo.store import NotFoundError
+from gsgeo.store import ConflictError, NotFoundError
 
 
 def tileset_of(scene_dir: Path) -> Path:
@@ -29,13 +31,26 @@ def tileset_of(scene_dir: Path) -> Path:
     return ts
 
 
+def scene_splats(scene_dir: Path) -> SplatIndex:
+    """The splats of a scene folder (read once per tileset version); NotFoundError without a
+    tileset.json, ConflictError naming the problem when its tiles cannot be read as splats
+    (not SPZ splats, truncated or corrupt files)."""
+    ts = tileset_of(scene_dir)
+    try:
+        return scene_index(ts)
+    except (GsgeoError, OSError, ValueError, KeyError, TypeError, IndexError, EOFError,
+            RecursionError, struct.error, zlib.error) as exc:
+        raise ConflictError(f"the splats of scene {Path(scene_dir).name!r} cannot be read: "
+                            f"{exc}", field="scene") from None
+
+
 def depth_on_ray(scene_dir: Path, rays: Rays) -> dict[str, Any]:
     """The depth hint of the first of ``rays`` in the scene (gsgeo.aim.depth.depth_hint), as
     the JSON of POST /api/scenes/{scene}/depth."""
     if len(rays) < 1:
         raise InputError("one ray is needed", field="ray")
     ifov = None if rays.ifov is None else float(rays.ifov[0])
-    index = scene_index(tileset_of(scene_dir))
+    index = scene_splats(scene_dir)
     hint = depth_hint(index, rays.origins[0], rays.directions[0],
                       ifov if ifov == ifov else None, rays.model_matrix(0))
     return hint.to_json()
@@ -80,7 +95,7 @@ def views_for_point(scene_dir: Path, rays: Rays, point: Any, k: int, fovy: float
     p = np.asarray(point, dtype=np.float64).reshape(3)
     if np.linalg.norm(p - rays.origins[0]) < 1e-3:
         raise InputError("the point lies at the first ray's origin", field="point_ecef")
-    index = scene_index(tileset_of(scene_dir))
+    index = scene_splats(scene_dir)
     views = suggest_views(index, rays.origins, rays.directions, rays.ifov, p, k, fovy, width,
                           height, sigma_px, rays.model_matrix(0))
     return {"views": [v.to_json() for v in views]}
