@@ -24,6 +24,7 @@ from gsgeo import __version__
 from gsgeo.errors import InputError
 from gsgeo.server import models as m
 from gsgeo.server.etags import IfMatch, if_match_versions, with_etag
+from gsgeo.server.hosts import is_loopback
 from gsgeo.server.scenes import list_scenes
 from gsgeo.service import CheckPointRecord, FeatureRecord, PointRecord, Project, Projects
 from gsgeo.service.audit import audit_page
@@ -108,10 +109,15 @@ def feature_json(f: FeatureRecord, measures: dict[str, Any] | None = None) -> di
 
 
 # info, intersect, crs, scenes --------------------------------------------------------------
-@router.get("/info", summary="Server version, limits and whether a token is required")
+@router.get("/info", summary="Server version, limits, whether a token is required, who asks")
 def info(request: Request) -> dict[str, Any]:
     cfg = request.app.state.config
-    return {"version": __version__, "token_required": cfg.token is not None,
+    state = request.scope.get("state") or {}
+    # a token is required where a request without one is refused: with the server's own
+    # token, and off loopback for everyone (a user's or the server's token)
+    return {"version": __version__,
+            "token_required": cfg.token is not None or not is_loopback(str(cfg.host)),
+            "user": state.get("gsgeo_user"), "role": state.get("gsgeo_role"),
             "max_body_bytes": cfg.max_body, "max_upload_bytes": cfg.max_upload,
             "cesium_url": "/cesium/", "scenes_url": "/scenes/"}
 

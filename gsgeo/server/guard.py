@@ -14,7 +14,10 @@
   the server's token as "admin-token", no token on loopback (when none is configured) as
   "local". Off loopback a token is required even when none is configured. A ``viewer`` may
   only read: any other method than GET/HEAD/OPTIONS on /api or /ogc (POST /api/intersect,
-  which stores nothing, aside) gets 403 naming the role.
+  which stores nothing, aside) gets 403 naming the role. Only an ``admin`` may delete a whole
+  project (``DELETE /api/projects/{pid}``: it takes every point, line, building, check point
+  of it along); a surveyor gets 403 naming the role. The request's user and role are in
+  ``scope["state"]`` (``gsgeo_user``, ``gsgeo_role``) for the routes (``GET /api/info``).
 - The Host header must be one the server answers to (defeats DNS rebinding on loopback).
 - An /api or /ogc request from a browser page of another origin (``Origin`` header not matching the
   Host) gets 403: CORS is closed, and this also stops cross-site form posts.
@@ -23,6 +26,7 @@
 from __future__ import annotations
 
 import json
+import re
 import secrets
 from collections.abc import Callable
 from urllib.parse import unquote
@@ -50,6 +54,8 @@ READ_METHODS = ("GET", "HEAD", "OPTIONS")
 READ_POSTS = ("/api/intersect",)
 #: At most this many presented tokens are looked up (a request offers one or two).
 MAX_TOKENS = 4
+#: What only an admin may do: (method, path pattern, what it does).
+ADMIN_ONLY = (("DELETE", re.compile(r"/api/projects/[^/]+/?"), "deletes a whole project"),)
 
 
 class BodyTooLarge(Exception):
@@ -181,6 +187,14 @@ class Guard:
                                  f"only read: {method} {path[:120]} changes data (ask an admin "
                                  "for the surveyor role)", "Authorization")
                 return
+            admin_only = next((what for m, pattern, what in ADMIN_ONLY
+                               if m == method and pattern.fullmatch(path)), None)
+            if is_api and admin_only is not None and who[1] != "admin":
+                await _send_json(send, 403, f"user '{who[0]}' has the role {who[1]}: "
+                                 f"{method} {path[:120]} {admin_only}, which only an admin may "
+                                 "do", "Authorization")
+                return
+            scope.setdefault("state", {}).update(gsgeo_user=who[0], gsgeo_role=who[1])
         limit: int | None = None
 
         def body_limit() -> int:  # looked up only for requests that have a body
