@@ -197,3 +197,34 @@ def test_a_1280x720_pair_matches_in_well_under_100_ms(noise):
         times.append(time.perf_counter() - t0)
         assert res.ok
     assert min(times) < 0.1
+
+
+def test_match_answers_whatever_the_geometry(noise):
+    """Random cameras, clicks and depth ranges: always an answer (ok on the segment, or a
+    reason), never an exception."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    ref_img = render(REF, noise)
+    small = ref_img[::4, ::4].copy()
+    coords = st.floats(-30, 30, allow_nan=False)
+
+    @settings(max_examples=60, deadline=None)
+    @given(pos=st.tuples(coords, coords, st.floats(-5, 30)),
+           look=st.tuples(coords, coords, st.floats(-5, 5)),
+           click=st.tuples(st.floats(-50, W + 50), st.floats(-50, H + 50)),
+           near=st.floats(0, 50), span=st.floats(0, 200), frac=st.floats(0, 1),
+           tiny=st.booleans())
+    def check(pos, look, click, near, span, frac, tiny):
+        if np.linalg.norm(np.subtract(pos, look)) < 1e-3:
+            return
+        tgt = Camera.look_at(to_ecef(pos), to_ecef(look), UP, FOVY, W, H)
+        far = near + span
+        res = match_feature(View(ref_img, np.zeros(2), REF), np.array(click),
+                            View(small if tiny else ref_img, np.zeros(2), tgt), near, far,
+                            near + frac * span)
+        assert res.ok or res.reason
+        if res.ok:
+            assert near - 0.05 * span - 1e-6 <= res.depth_m <= far + 0.05 * span + 1e-6
+
+    check()

@@ -105,3 +105,35 @@ def test_views_are_quick_after_the_first_call():
     t0 = time.perf_counter()
     suggest_views(index, o, d, np.array([1e-3]), POINT, 4, FOVY, W, H)
     assert time.perf_counter() - t0 < 0.5
+
+
+def test_views_and_depth_answer_whatever_the_rays():
+    """Random rays and points (near or far, inside the splats or above): always an answer with
+    finite numbers, never an exception."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from gsgeo.aim.depth import depth_hint
+
+    index = index_of(plane_splats(half=3.0, step=0.1), wall_splats(1.0, half=3.0, top=3.0))
+    local = st.tuples(st.floats(-50, 50), st.floats(-50, 50), st.floats(-5, 50))
+
+    @settings(max_examples=40, deadline=None)
+    @given(origins=st.lists(local, min_size=1, max_size=4), point=local,
+           k=st.integers(1, 12), ifov=st.one_of(st.none(), st.floats(1e-5, 1e-2)))
+    def check(origins, point, k, ifov):
+        o = to_ecef(np.array(origins))
+        p = to_ecef(point)
+        if np.min(np.linalg.norm(o - p, axis=1)) < 1e-2:
+            return
+        f = None if ifov is None else np.full(len(o), ifov)
+        views = suggest_views(index, o, p - o, f, p, k, FOVY, W, H)
+        assert 1 <= len(views) <= k
+        for v in views:
+            assert math.isfinite(v.predicted_sigma_m) and math.isfinite(v.min_angle_deg)
+        hint = depth_hint(index, o[0], p - o[0], ifov)
+        assert hint.hit == (hint.depth_m is not None)
+        if hint.hit:
+            assert 0 <= hint.near_m <= hint.depth_m <= hint.far_m
+
+    check()

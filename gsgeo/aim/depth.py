@@ -140,10 +140,11 @@ def depth_along(profile: RayProfile) -> tuple[float, float, float] | None:
         return None
     cum = np.cumsum(profile.weight)
     i = int(np.searchsorted(cum, 0.5))
-    prev = cum[i - 1] if i else 0.0
-    t0 = profile.t[i - 1] if i else profile.t[i] - BOUND_SIGMAS * profile.sigma_t[i]
-    frac = (0.5 - prev) / max(cum[i] - prev, 1e-12)
-    depth = float(t0 + frac * (profile.t[i] - t0))
+    if i == 0:   # the first splat alone makes the pixel: its densest point
+        depth = float(profile.t[0])
+    else:        # between the splats before and at which the opacity passes 1/2
+        frac = (0.5 - cum[i - 1]) / max(cum[i] - cum[i - 1], 1e-12)
+        depth = float(profile.t[i - 1] + frac * (profile.t[i] - profile.t[i - 1]))
     lo = int(np.searchsorted(cum, BOUND_LOW * total))
     hi = min(int(np.searchsorted(cum, BOUND_HIGH * total)), cum.size - 1)
     pad = BOUND_RELATIVE * depth
