@@ -137,3 +137,18 @@ def test_views_made_by_an_older_gsgeo_are_made_again_on_start(cluster, db, svc, 
         assert cluster.sql(db, "SELECT views FROM gsgeo_schema") == [(VIEWS_VERSION,)]
     finally:
         reopened.close()
+
+
+def test_buildings_stored_by_an_older_gsgeo_get_their_surfaces_on_start(cluster, db, svc,
+                                                                        house, tmp_path):
+    from gsgeo.service import open_projects
+
+    n = cluster.sql(db, "SELECT count(*) FROM gsgeo_h_buildings")[0][0]
+    cluster.sql(db, "DELETE FROM building_surfaces")  # as a gsgeo before the layer left it
+    svc.store.close()
+    again = open_projects(tmp_path, url=cluster.url(db))
+    try:
+        assert cluster.sql(db, "SELECT count(*) FROM gsgeo_h_buildings") == [(n,)]
+        assert again.keep_missing_surfaces() == 0  # nothing left to catch up
+    finally:
+        again.store.close()

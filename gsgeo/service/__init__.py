@@ -36,8 +36,11 @@ from gsgeo.store import (
 def open_projects(data_dir: str | Path, store: Store | None = None,
                   url: str | None = None) -> Projects:
     """The project service over ``store``, else the store ``url`` names (a PostgreSQL
-    database: gsgeo.store.open_store), else the data directory's SQLite store."""
-    return Projects(store if store is not None else open_store(data_dir, url), data_dir)
+    database: gsgeo.store.open_store), else the data directory's SQLite store. The surfaces
+    of buildings a store keeps for GIS are caught up (those stored by an older gsgeo)."""
+    svc = Projects(store if store is not None else open_store(data_dir, url), data_dir)
+    svc.keep_missing_surfaces()
+    return svc
 
 
 __all__ = [

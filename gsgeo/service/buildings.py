@@ -301,6 +301,23 @@ class BuildingService:
             tx.set_building_surfaces(p.id, r.record.id,
                                      [] if r.model is None else building_surfaces(r.model))
 
+    def keep_missing_surfaces(self) -> int:
+        """Write the kept surfaces of every building that has none (stored by a gsgeo that
+        kept none; one that cannot be built is tried again); returns how many buildings were
+        looked at. Nothing where the store keeps no surfaces."""
+        with self.store.transaction(write=False) as tx:
+            missing = tx.buildings_without_surfaces() if tx.keeps_building_surfaces() else []
+        if not missing:
+            return 0
+        with self.store.transaction() as tx:
+            for pid in dict.fromkeys(q for q, _ in missing):
+                p = tx.get_project(pid)
+                wanted = {b for q, b in missing if q == pid}
+                for b in [] if p is None else tx.list_buildings(pid):
+                    if p is not None and b.id in wanted:
+                        self.keep_surfaces(tx, p, self.built_in(tx, p, b))
+        return len(missing)
+
     def building_results(self, pid: str) -> tuple[Project, list[BuildingResult]]:
         """The project and each of its buildings with its model now (or its error)."""
         self.follow_scene(pid)

@@ -219,6 +219,12 @@ class Transaction(ABC):
         keeps none ignores this."""
         return None
 
+    def buildings_without_surfaces(self) -> list[tuple[str, str]]:
+        """(project id, building id) of every building of which no surface is kept (one
+        stored by a gsgeo that kept none, or one that cannot be built); empty where the
+        store keeps none."""
+        return []
+
     # check points
     @abstractmethod
     def list_check_points(self, pid: str) -> list[CheckPointRecord]: ...

@@ -450,6 +450,12 @@ class PostgresTransaction(Transaction):
     def keeps_building_surfaces(self) -> bool:
         return True
 
+    def buildings_without_surfaces(self) -> list[tuple[str, str]]:
+        rows = self._all("SELECT b.project_id, b.id FROM buildings b WHERE NOT EXISTS"
+                         " (SELECT 1 FROM building_surfaces s WHERE s.project_id = b.project_id"
+                         " AND s.building_id = b.id) ORDER BY b.project_id, b.seq")
+        return [(r["project_id"], r["id"]) for r in rows]
+
     def set_building_surfaces(self, pid: str, bid: str,
                               surfaces: Sequence[BuildingSurface]) -> None:
         self._count("DELETE FROM building_surfaces WHERE project_id = %s AND building_id = %s",
