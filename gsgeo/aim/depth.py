@@ -21,7 +21,6 @@ import numpy as np
 from gsgeo.aim.splatindex import SplatIndex
 from gsgeo.crs.modelmatrix import apply_directions, apply_points, invert_affine
 from gsgeo.solve.linalg import FloatArray
-from gsgeo.tiles.splats import quat_to_matrix
 
 #: Accumulated opacity at which a ray counts as hitting the scene (the median of what the
 #: pixel shows then lies on splats).
@@ -109,7 +108,7 @@ def ray_profile(index: SplatIndex, origin: FloatArray, direction: FloatArray,
     idx = near_ray(index, origin, direction, ifov, t_max)
     d = np.asarray(direction, dtype=np.float64)
     rel = np.asarray(origin, dtype=np.float64) - index.centre - index.offsets[:, idx].T
-    rot = quat_to_matrix(index.quats[idx].astype(np.float64))         # splat axes -> ECEF
+    rot = index.rotations[idx].astype(np.float64)                      # splat axes -> ECEF
     a = np.einsum("nji,nj->ni", rot, rel)                              # origin, splat axes
     b = np.einsum("nji,j->ni", rot, d)                                 # direction, splat axes
     s2 = index.sigmas[idx].astype(np.float64) ** 2

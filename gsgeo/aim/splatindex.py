@@ -23,7 +23,7 @@ import numpy as np
 
 from gsgeo.errors import InputError
 from gsgeo.tiles.reader import iter_tileset
-from gsgeo.tiles.splats import matrix_to_quat, quat_multiply
+from gsgeo.tiles.splats import matrix_to_quat, quat_multiply, quat_to_matrix
 
 #: A splat reaches this many standard deviations from its centre (3DGS renderers cut there).
 EXTENT_SIGMAS = 3.0
@@ -77,6 +77,12 @@ class SplatIndex:
         return int(self.alpha.shape[0])
 
     @cached_property
+    def rotations(self) -> np.ndarray:
+        """(N, 3, 3) float32 rotation matrices of ``quats`` (splat axes -> ECEF), made once:
+        every ray query needs those of the splats it touches."""
+        return quat_to_matrix(self.quats).astype(np.float32)
+
+    @cached_property
     def blocks(self) -> tuple[np.ndarray, np.ndarray]:
         """Boxes (lo, hi), each (B, 3) offsets, of consecutive runs of BLOCK splats (reach
         included): the splats are stored in Z-order, so each run is compact in space and a
@@ -107,27 +113,38 @@ class SplatIndex:
         half = hi.astype(np.float64) - mid
         return mid, np.sqrt(np.einsum("ij,ij->i", half, half))
 
+    @cached_property
+    def block_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """The blocks' boxes as (3, B) float64 rows lo and hi, one contiguous row per axis
+        (per-axis arithmetic is several times faster than reductions over a short axis)."""
+        lo, hi = self.blocks
+        return (np.ascontiguousarray(lo.T, dtype=np.float64),
+                np.ascontiguousarray(hi.T, dtype=np.float64))
+
     def blocks_near_ray(self, origin: np.ndarray, direction: np.ndarray, spread: float,
                         t_max: float | None = None) -> np.ndarray:
         """Block numbers whose box, widened by ``spread`` metres per metre of distance from
         the origin, the ray (offset origin, unit direction) passes through in front of the
-        origin (and before ``t_max``)."""
-        lo, hi = self.blocks
+        origin (and before ``t_max``): the slab test, one axis at a time."""
+        lo, hi = self.block_axes
         o = np.asarray(origin, dtype=np.float64)
         d = np.asarray(direction, dtype=np.float64)
+        grow: np.ndarray | float = 0.0
         if spread > 0:
             mid, radius = self.block_spheres
             rel = mid - o
-            grow = (spread * (np.sqrt(np.einsum("ij,ij->i", rel, rel)) + radius))[:, None]
-            lo, hi = lo - grow, hi + grow
-        inv = 1.0 / np.where(np.abs(d) < 1e-12, 1e-12, d)
-        t1, t2 = (lo - o) * inv, (hi - o) * inv
-        t_in = np.minimum(t1, t2).max(axis=1)
-        t_out = np.maximum(t1, t2).min(axis=1)
-        hit = (t_out >= np.maximum(t_in, 0.0))
-        if t_max is not None:
-            hit &= t_in <= t_max
-        return np.flatnonzero(hit)
+            grow = spread * (np.sqrt(np.einsum("ij,ij->i", rel, rel)) + radius)
+        t_in = np.zeros(lo.shape[1])
+        t_out = np.full(lo.shape[1], np.inf if t_max is None else float(t_max))
+        for k in range(3):
+            inv = 1.0 / (d[k] if abs(d[k]) >= 1e-12 else 1e-12)
+            t1 = (lo[k] - grow - o[k]) * inv
+            t2 = (hi[k] + grow - o[k]) * inv
+            if inv < 0:
+                t1, t2 = t2, t1
+            np.maximum(t_in, t1, out=t_in)
+            np.minimum(t_out, t2, out=t_out)
+        return np.flatnonzero(t_out >= t_in)
 
     def blocks_near_point(self, point: np.ndarray, radius: float) -> np.ndarray:
         """Block numbers whose box comes within ``radius`` metres of a point (offsets)."""
