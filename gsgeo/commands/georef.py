@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from gsgeo.commands.storearg import add_store_argument, store_url
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSONObject
 
@@ -35,6 +36,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="a stored project (its points and control points) instead of a session")
     p.add_argument("--data", default="gsgeo-data", metavar="DIR",
                    help="data directory of --project (as for gsgeo serve; default gsgeo-data)")
+    add_store_argument(p)
     p.add_argument("--control", default=None, metavar="FILE",
                    help="control points (CSV, GeoJSON or GeoPackage; columns id, x/y/z or "
                         "easting/northing/height, optional sigma_h, sigma_v in metres)")
@@ -178,7 +180,7 @@ def _project_mode(args: argparse.Namespace) -> JSONObject:
     data = Path(args.data)
     if not data.is_dir():
         raise InputError(f"--data {data}: no such directory")
-    svc = open_projects(data)
+    svc = open_projects(data, url=store_url(args))
     try:
         p = svc.get_project(args.project)
         if args.apply and Path(args.apply).resolve() != (data / "scenes" / str(p.scene)).resolve():

@@ -1,8 +1,9 @@
 """`gsgeo report PROJECT -o REPORT.pdf|REPORT.html`: a project's survey report.
 
-Reads the project from the store of ``--data`` (as `gsgeo serve` does), gathers it through
-gsgeo.service.reporting and renders it with gsgeo.report. The format comes from the output
-suffix; the file is written atomically, so a failure leaves an earlier report intact.
+Reads the project from the store of ``--data``, or the PostgreSQL one of ``--store URL`` (as
+`gsgeo serve` does), gathers it through gsgeo.service.reporting and renders it with
+gsgeo.report. The format comes from the output suffix; the file is written atomically, so a
+failure leaves an earlier report intact.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from gsgeo.errors import InputError
+from gsgeo.commands.storearg import add_store_argument, require_sqlite_store, store_url
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -30,21 +31,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--data", default="gsgeo-data", metavar="DIR",
                    help="data directory with the project store (default: ./gsgeo-data, as "
                         "for gsgeo serve)")
+    add_store_argument(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsgeo.store import DB_NAME
-
     data_dir = Path(args.data)
-    if not (data_dir / DB_NAME).is_file():
-        raise InputError(f"--data {data_dir}: no project store ({DB_NAME}) there; "
-                         "gsgeo serve or gsgeo demo creates one")
+    url = store_url(args)
+    if url is None:
+        require_sqlite_store(data_dir)
     from gsgeo.service import open_projects
     from gsgeo.service.reporting import write_report
 
     t0 = time.perf_counter()
-    projects = open_projects(data_dir)
+    projects = open_projects(data_dir, url=url)
     try:
         data = write_report(projects, args.project, args.output)
     finally:
