@@ -127,6 +127,8 @@ def test_match_declines_with_a_reason_and_200(served):
     (lambda b: b["depth"].update(depth_m=b["depth"]["far_m"] + 1), "depth.depth_m"),
     (lambda b: b["reference"].pop("pixel"), "reference.pixel"),
     (lambda b: b.pop("depth"), "depth"),
+    (lambda b: b["target"]["camera"].update(width=640, height=360), "target.image"),
+    (lambda b: b["reference"].update(origin=[100, 0]), "reference.image"),
 ])
 def test_match_of_a_bad_request_is_422_naming_the_field(served, change, field):
     client, _ = served

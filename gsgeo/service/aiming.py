@@ -65,9 +65,17 @@ def camera_of(doc: dict[str, Any], field: str) -> Camera:
 
 def view_of(doc: dict[str, Any], field: str) -> View:
     """A rendered view of a JSON object (image: base64 PNG/JPEG, origin, camera)."""
-    origin = doc.get("origin") or [0.0, 0.0]
-    return View(decode_image(doc["image"], f"{field}.image"),
-                np.asarray(origin, dtype=np.float64), camera_of(doc["camera"], f"{field}.camera"))
+    origin = np.asarray(doc.get("origin") or [0.0, 0.0], dtype=np.float64)
+    image = decode_image(doc["image"], f"{field}.image")
+    camera = camera_of(doc["camera"], f"{field}.camera")
+    h, w = image.shape
+    # an image in device pixels with a camera in CSS pixels would match nothing: say so
+    if origin[0] < -1 or origin[1] < -1 or origin[0] + w > camera.width + 1 \
+            or origin[1] + h > camera.height + 1:
+        raise InputError(f"is {w}x{h} px at origin ({origin[0]:g}, {origin[1]:g}), beyond the "
+                         f"{camera.width:g}x{camera.height:g} canvas of its camera: send the "
+                         "view (or a crop of it) in CSS pixels, as the camera", field=f"{field}.image")
+    return View(image, origin, camera)
 
 
 def match_views(reference: dict[str, Any], target: dict[str, Any],
