@@ -3,6 +3,7 @@
     python benchmarks/store_load.py [--backends sqlite postgresql] [--store URL]
         [--kinds intersect points] [--loads one operators saturation]
         [--clients 50] [--requests 40] [--think 2] [--client-procs 2] [--pg-fsync on|off]
+        [--store-threads N]
         [--json FILE]
 
 For each backend, one `gsgeo serve` on a free 127.0.0.1 port with a fresh data directory:
@@ -280,6 +281,8 @@ def bench_backend(backend: str, args: argparse.Namespace) -> dict:
         port = free_port()
         cmd = [sys.executable, "-m", "gsgeo", "serve", "--data", str(tmp / "data"),
                "--port", str(port), "--workers", str(args.workers)]
+        if args.store_threads is not None:
+            cmd += ["--store-threads", str(args.store_threads)]
         db_pid = None
         if backend == "postgresql":
             url = args.store
@@ -429,6 +432,8 @@ def main() -> int:
     ap.add_argument("--think", type=float, default=2.0,
                     help="mean think time between an operator's requests, s")
     ap.add_argument("--workers", type=int, default=1, help="gsgeo serve --workers")
+    ap.add_argument("--store-threads", type=int, default=None,
+                    help="gsgeo serve --store-threads (default: the server's)")
     ap.add_argument("--client-procs", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the figures here")
     ap.add_argument("--inprocess", type=int, default=0, metavar="N",

@@ -35,6 +35,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--solver-threads", type=int, default=1, metavar="N",
                    help="threads (per worker process) that run POST /api/intersect (default 1; "
                         "they keep their PROJ objects for the server's lifetime)")
+    p.add_argument("--store-threads", type=int, default=4, metavar="N",
+                   help="threads (per worker process) that store new points, POST "
+                        "/api/projects/{pid}/points (default 4; kept warm for the server's "
+                        "lifetime; 0: FastAPI's pool, which starts threads on demand)")
     p.add_argument("--log-level", default="warning",
                    choices=["critical", "error", "warning", "info", "debug"])
     p.add_argument("--store", default=None, metavar="URL",
@@ -96,6 +100,9 @@ def run(args: argparse.Namespace) -> int:
     solver_threads = getattr(args, "solver_threads", 1)
     if not 1 <= solver_threads <= 64:
         raise InputError(f"--solver-threads must be between 1 and 64, got {solver_threads}")
+    store_threads = getattr(args, "store_threads", 4)
+    if not 0 <= store_threads <= 64:
+        raise InputError(f"--store-threads must be between 0 and 64, got {store_threads}")
     from gsgeo.store import STORE_ENV
 
     # callers such as `gsgeo demo` may leave it out; a bad URL or an unreachable server is a
@@ -104,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
     config = ServerConfig(data_dir=data, host=args.host, port=args.port, token=token,
                           store_url=store_url,
                           web_dir=Path(args.web) if args.web else None,
-                          solver_threads=solver_threads, scenes_url=hosts.base,
+                          solver_threads=solver_threads, store_threads=store_threads,
+                          scenes_url=hosts.base,
                           scene_urls=dict(hosts.folders))
     app = create_app(config)  # opens (and migrates) the store before accepting requests
     common = {"host": args.host, "port": args.port, "log_level": log_level,

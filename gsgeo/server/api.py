@@ -17,6 +17,7 @@ from typing import Annotated, Any, Literal
 
 import orjson
 from fastapi import APIRouter, Body, File, Form, Query, Request, Response, UploadFile
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
 
@@ -268,8 +269,17 @@ def list_points(pid: PID, request: Request,
 
 @router.post("/projects/{pid}/points", status_code=201, response_model=JSON_OBJECT,
              summary="Solve and store a point")
-def create_point(pid: PID, body: m.PointCreate, request: Request) -> dict[str, Any] | Response:
-    pt = svc(request).add_point(pid, body.to_input())
+async def create_point(pid: PID, body: m.PointCreate,
+                       request: Request) -> dict[str, Any] | Response:
+    pool = request.app.state.store_pool  # long-lived threads, warm (gsgeo serve --store-threads)
+    if pool is None:
+        return await run_in_threadpool(store_point, svc(request), pid, body)
+    return await pool.run(store_point, svc(request), pid, body)
+
+
+def store_point(projects: Projects, pid: str, body: m.PointCreate) -> Response:
+    """The work of POST /projects/{pid}/points, on a thread of the store pool."""
+    pt = projects.add_point(pid, body.to_input())
     return with_etag(fast_json(point_json(pt), 201), pt.version)
 
 

@@ -62,6 +62,8 @@ class ServerConfig:
     max_body: int = 4 * MiB
     max_upload: int = 64 * MiB
     solver_threads: int = 1  # long-lived threads for POST /api/intersect (gsgeo.server.intersect_pool)
+    # long-lived threads for POST /api/projects/{pid}/points (0: FastAPI's on-demand pool)
+    store_threads: int = 4
     store_url: str | None = None  # postgresql://... (gsgeo.store.open_store); None: DATA/gsgeo.sqlite
     allowed_hosts: set[str] | None = field(default=None)  # None: derived from host
     # Tiles on a static host (gsgeo.server.scenehosts): the base URL of the scene folders,
@@ -182,14 +184,20 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     projects = open_projects(config.data_dir, store, config.store_url)  # store_url: None: SQLite
     store = projects.store
     intersect_pool = IntersectPool(config.solver_threads)
+    store_pool = IntersectPool(config.store_threads, "gsgeo-store") \
+        if config.store_threads else None
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         from gsgeo.server.api import warm_intersect
 
         await intersect_pool.warm_up(warm_intersect)
+        if store_pool is not None:
+            await store_pool.warm_up(warm_intersect)
         yield
         intersect_pool.close()
+        if store_pool is not None:
+            store_pool.close()
         store.close()
 
     app = FastAPI(title="gsgeo", version=__version__, lifespan=lifespan,
@@ -198,6 +206,7 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     app.state.config = config
     app.state.store = store
     app.state.intersect_pool = intersect_pool
+    app.state.store_pool = store_pool
     app.state.projects = projects
     _install_error_handlers(app)
 
@@ -283,7 +292,8 @@ def config_to_env(config: ServerConfig) -> str:
                        "port": config.port, "token": config.token,
                        "web_dir": str(config.web_dir), "cesium_dir": str(config.cesium_dir),
                        "max_body": config.max_body, "max_upload": config.max_upload,
-                       "solver_threads": config.solver_threads, "store_url": config.store_url,
+                       "solver_threads": config.solver_threads,
+                       "store_threads": config.store_threads, "store_url": config.store_url,
                        "scenes_url": config.scenes_url, "scene_urls": config.scene_urls,
                        "allowed_hosts": sorted(config.allowed_hosts)
                        if config.allowed_hosts is not None else None})
