@@ -12,6 +12,8 @@ import { georefPanel } from "./georef.js";
 import { buildingsPanel } from "./buildings.js";
 import { georefVersion, moveCamera } from "./similarity.js";
 import { tileFailureText } from "./scenehost.js";
+import { installGuide } from "./guide.js";
+import { nextView } from "./views.js";
 
 const Cesium = window.Cesium;
 
@@ -439,6 +441,7 @@ const ctx = {
 
 const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged });
 const buildings = buildingsPanel({ state, draw, modelMatrix, message, fail });
+installGuide(ctx, draw.overlay);
 
 // ---------------------------------------------------------------------------------------
 // points
@@ -787,6 +790,7 @@ document.addEventListener("keydown", (ev) => {
   if (shortcut) { activate(ctx, shortcut.id); ev.preventDefault(); }
   else if (key === "e" || key === "E") { setConf(state.conf === "95" ? "1" : "95"); ev.preventDefault(); }
   else if (key === "g" || key === "G") { georef.toggle(); ev.preventDefault(); }
+  else if (key === "v" || key === "V") { nextView(ctx); ev.preventDefault(); }
   else if (key === "?" || key === "h" || key === "H") { toggleHelp(true); ev.preventDefault(); }
   else if (key === "Escape" && state.selected) { selectPoint(null, false); }
 });

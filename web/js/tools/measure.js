@@ -10,8 +10,19 @@ import { COLORS, cart } from "../draw.js";
 import { $, fixed, h, mm } from "../format.js";
 import { applyPoint, norm, sub } from "../linalg.js";
 import { captureRay, raysInCurrentFrame } from "../rays.js";
+import { hitsNothing, refresh as refreshGuide, requestDepth } from "../guide.js";
 
 const Cesium = window.Cesium;
+
+/** What to say about ray i (0-based) of `m` that hits no splat: how to get rid of it. */
+function noHitText(m, i) {
+  return `Ray ${i + 1} hits no splat (sky?) — ${i === m.rays.length - 1 ? "Backspace removes it" : "exclude it"}`;
+}
+
+/** The indices of the rays known to hit no splat (and not excluded). */
+function noHitRays(m) {
+  return m.rays.map((r, i) => i).filter((i) => !m.excluded.has(i) && hitsNothing(m.rays[i]));
+}
 
 /** The next free automatic point id P<n> (above every stored P<number>). */
 function nextPointId(points) {
@@ -84,8 +95,9 @@ function render(ctx, busy = false) {
     const rr = res && res.rays ? res.rays[i] : null;
     const excluded = m.excluded.has(i);
     const outlier = rr && rr.outlier;
-    return h("tr", { class: excluded ? "excluded" : (outlier ? "outlier" : "") },
-      h("td", {}, `${i + 1}${outlier ? " ⚑ outlier" : ""}`),
+    const noHit = !excluded && hitsNothing(ray);
+    return h("tr", { class: excluded ? "excluded" : (outlier || noHit ? "outlier" : "") },
+      h("td", noHit ? { title: noHitText(m, i) } : {}, `${i + 1}${outlier ? " ⚑ outlier" : ""}${noHit ? " ⚠ hits no splat (sky?)" : ""}`),
       h("td", { class: "num" }, rr ? fixed(rr.residual_px, 2) : "—"),
       h("td", { class: "num" }, rr ? mm(rr.residual_m) : "—"),
       h("td", {}, h("button", { onclick: () => toggleExclude(ctx, i), title: excluded ? "use this ray again" : "leave this ray out of the solution" }, excluded ? "restore" : "exclude")));
@@ -103,6 +115,8 @@ function render(ctx, busy = false) {
   } else {
     live.textContent = busy ? "solving…" : (m.rays.length < 2 ? `Needs at least 2 rays (${m.rays.length} so far).` : "");
   }
+  const sky = noHitRays(m);
+  if (sky.length) live.append(h("div", { class: "warn" }, ...sky.map((i) => h("div", {}, `⚠ ${noHitText(m, i)}.`))));
   draw(ctx);
 }
 
@@ -139,6 +153,9 @@ function draw(ctx) {
     }
   });
   $("#ellipsoid-note").textContent = res ? ellipsoidNote(state.conf, radii) : "";
+  // the epipolar guide (guide.js) needs each ray's depth; it draws itself after the render
+  for (const ray of m.rays) requestDepth(ctx, ray);
+  refreshGuide(ctx.viewer);
 }
 
 function end(ctx) {
@@ -196,6 +213,13 @@ const measure = {
     // the scene's georeference version the rays are taken in, stored with the point
     if (!m.rays.length) m.georefVersion = ctx.georefVersion();
     m.rays.push(ray);
+    // a click on the sky: said at once, and the ray stays flagged in its row and the solution
+    requestDepth(ctx, ray).then((d) => {
+      if (!d || d.hit !== false || ctx.state.measure !== m || !m.rays.includes(ray)) return;
+      ctx.message(noHitText(m, m.rays.indexOf(ray)), true);
+      render(ctx);
+      ctx.updateStatus();
+    });
     solveLive(ctx);
     ctx.updateStatus();
   },
@@ -255,8 +279,10 @@ const measure = {
     const name = m.editing ? `point ${m.editing}` : m.pointId;
     let text;
     if (n === 0) text = `Measuring ${name}: click the feature to add ray 1. Esc cancels.`;
-    else if (n === 1) text = `Ray 1 of ${name} added. Move the camera to another viewpoint (30° or more away) and click the same feature for ray 2. Backspace removes ray 1, Esc cancels.`;
+    else if (n === 1) text = `Ray 1 of ${name} added. Move the camera to another viewpoint (30° or more away; V flies to a suggested one) and click the same feature for ray 2. Backspace removes ray 1, Esc cancels.`;
     else text = `${n} rays on ${name}. Click the feature from another viewpoint for ray ${n + 1}, or press Enter to store it. Backspace removes ray ${n}, Esc cancels.`;
+    const sky = noHitRays(m);
+    if (sky.length) text = `${noHitText(m, sky[0])}. ${n} rays on ${name}; Esc cancels.`;
     return { text, className: "measuring" };
   },
 
