@@ -41,6 +41,8 @@ def test_depth_of_the_plane(served):
     assert np.linalg.norm(np.array(body["point_ecef"]) - target) < 0.03
     assert body["near_m"] < body["depth_m"] < body["far_m"]
     assert body["n_splats"] > 0
+    up = m[:3, 2] / np.linalg.norm(m[:3, 2])                  # the plane's normal, local up
+    assert np.dot(body["normal_ecef"], up) > 0.99
 
 
 def test_depth_into_the_sky(served):
@@ -128,6 +130,7 @@ def test_match_declines_with_a_reason_and_200(served):
     (lambda b: b["reference"].pop("pixel"), "reference.pixel"),
     (lambda b: b.pop("depth"), "depth"),
     (lambda b: b["target"]["camera"].update(width=640, height=360), "target.image"),
+    (lambda b: b["depth"].update(normal_ecef=[0, 0, 0]), "depth.normal_ecef"),
     (lambda b: b["reference"].update(origin=[100, 0]), "reference.image"),
 ])
 def test_match_of_a_bad_request_is_422_naming_the_field(served, change, field):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from aim_helpers import EAST, NORTH, UP, index_of, plane_splats, to_ecef
+from aim_helpers import EAST, NORTH, UP, index_of, plane_splats, to_ecef, wall_splats
 
 from gsgeo.aim.depth import SKY, depth_hint
 
@@ -63,3 +63,19 @@ def test_the_model_matrix_is_undone_and_the_answer_given_in_the_rendered_frame()
     assert hint.hit
     assert abs(hint.depth_m - 10.0) < 0.03
     assert np.linalg.norm(hint.point - (target + m[:3, 3])) < 0.03
+
+
+def test_the_surface_normal_of_flat_splats(rng):
+    index = index_of(plane_splats(), wall_splats(3.0))
+    origin = to_ecef([-4.0, 1.0, 6.0])
+    hint = depth_hint(index, origin, to_ecef([0.5, 0.2, 0.0]) - origin, ifov=1e-3)
+    assert hint.normal is not None and hint.normal @ UP > 0.999      # the ground
+    hint = depth_hint(index, origin, to_ecef([3.0, 0.5, 2.0]) - origin, ifov=1e-3)
+    assert hint.normal is not None and hint.normal @ -EAST > 0.999   # the wall, facing us
+    assert hint.to_json()["normal_ecef"] == hint.normal.tolist()
+    # round splats have no normal
+    n = 2000
+    local = np.column_stack([rng.uniform(-2, 2, n), rng.uniform(-2, 2, n), np.zeros(n)])
+    blobs = index_of((to_ecef(local), np.full((n, 3), 0.05), np.tile([0.0, 0, 0, 1], (n, 1)),
+                      np.full(n, 0.9)))
+    assert depth_hint(blobs, origin, to_ecef([0.0, 0.0, 0.0]) - origin, 1e-3).normal is None

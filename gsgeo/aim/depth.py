@@ -37,6 +37,10 @@ BOUND_LOW, BOUND_HIGH = 0.02, 0.98
 BOUND_SIGMAS = 2.0
 BOUND_RELATIVE = 0.01
 SKY = "no splat along this ray (sky?)"
+#: A surface normal is given when the splats making the pixel are this flat on average and
+#: their normals' weighted resultant is at least this long (1: all alike).
+NORMAL_FLATNESS = 0.5
+NORMAL_AGREEMENT = 0.7
 
 
 @dataclass(frozen=True)
@@ -45,12 +49,16 @@ class RayProfile:
 
     t : (K,) depth of each splat's densest point; sigma_t : (K,) its standard deviation
     along the ray; alpha : (K,) its alpha there; weight : (K,) its share of the pixel
-    (alpha x transmittance in front of it)."""
+    (alpha x transmittance in front of it); normals : (K, 3) unit, the splat's thinnest axis
+    turned towards the ray's origin; flatness : (K,) 1 - thinnest / widest sigma (0 a ball,
+    1 a disc)."""
 
     t: FloatArray
     sigma_t: FloatArray
     alpha: FloatArray
     weight: FloatArray
+    normals: FloatArray
+    flatness: FloatArray
 
     @property
     def opacity(self) -> float:
@@ -70,12 +78,14 @@ class DepthHint:
     far_m: float | None
     n_splats: int
     reason: str | None
+    normal: FloatArray | None = None
 
     def to_json(self) -> dict[str, object]:
         return {"hit": self.hit, "depth_m": self.depth_m,
                 "point_ecef": None if self.point is None else self.point.tolist(),
                 "near_m": self.near_m, "far_m": self.far_m, "n_splats": self.n_splats,
-                "reason": self.reason}
+                "reason": self.reason,
+                "normal_ecef": None if self.normal is None else self.normal.tolist()}
 
 
 def near_ray(index: SplatIndex, origin: FloatArray, direction: FloatArray,
@@ -128,7 +138,29 @@ def ray_profile(index: SplatIndex, origin: FloatArray, direction: FloatArray,
     order = np.argsort(t, kind="stable")
     t, alpha, sigma_t = t[order], alpha[order], sigma_t[order]
     trans = np.cumprod(np.concatenate([[1.0], 1.0 - alpha]))[:-1]
-    return RayProfile(t, sigma_t, alpha, alpha * trans)
+    sig = index.sigmas[idx][keep][order]
+    thin = sig.argmin(axis=1)
+    normals = np.take_along_axis(rot[keep][order], thin[:, None, None], axis=2)[:, :, 0]
+    normals = normals * -np.sign(normals @ d + 1e-300)[:, None]      # facing the origin
+    flatness = 1.0 - sig.min(axis=1) / sig.max(axis=1)
+    return RayProfile(t, sigma_t, alpha, alpha * trans, normals, flatness.astype(np.float64))
+
+
+def surface_normal(profile: RayProfile) -> FloatArray | None:
+    """The surface's unit normal where the ray meets it (facing the ray's origin): the mean of
+    the thinnest axes of the splats making the pixel, each weighted by its share and its
+    flatness; None when they do not agree (resultant below NORMAL_AGREEMENT) or are not flat
+    (round splats have no normal)."""
+    w = profile.weight * profile.flatness
+    total = float(w.sum())
+    if total <= 0 or float(profile.weight @ profile.flatness) < NORMAL_FLATNESS * \
+            float(profile.weight.sum()):
+        return None
+    n = w @ profile.normals
+    length = float(np.linalg.norm(n))
+    if length < NORMAL_AGREEMENT * total:
+        return None
+    return np.asarray(n / length, dtype=np.float64)
 
 
 def depth_along(profile: RayProfile) -> tuple[float, float, float] | None:
@@ -181,4 +213,7 @@ def depth_hint(index: SplatIndex, origin: FloatArray, direction: FloatArray,
 
     depth, near, far = (rendered(v) for v in found)
     point = o_r + depth * d_r
-    return DepthHint(True, depth, point, near, far, int(prof.t.size), None)
+    normal = surface_normal(prof)
+    if normal is not None and m is not None:
+        normal = apply_directions(np.linalg.inv(m[:3, :3]).T, normal)   # normals: inverse transpose
+    return DepthHint(True, depth, point, near, far, int(prof.t.size), None, normal)

@@ -60,6 +60,10 @@ DEPTH_SLACK = 0.02
 #: at most this many warps per match.
 SWEEP_RATIO = 1.05
 MAX_TEMPLATES = 24
+#: A known surface normal is used unless a camera sees the plane this edge-on (cosine), and
+#: plane orientations closer than this (cosine) count as one.
+EDGE_ON = 0.2
+SAME_PLANE = 0.985
 #: Iterations and step (px) at which the sub-pixel alignment stops.
 ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4)
 
@@ -185,13 +189,14 @@ def depth_samples(near: float, far: float, depth: float) -> FloatArray:
 
 
 def warped_patch(ref: View, tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
-                 ray: FloatArray, t: float, click: FloatArray) -> tuple[np.ndarray, float] | str:
+                 ray: FloatArray, t: float, normal: FloatArray, click: FloatArray
+                 ) -> tuple[np.ndarray, float] | str:
     """The reference patch around the click as the target view would show it in the strip
-    frame if the feature lay at depth ``t`` on a plane parallel to the reference image
-    (2 HALF_PX + 1 square, the click at its centre), and the strip column of that centre;
-    a decline reason instead when the plane or patch does not map."""
+    frame if the feature lay at depth ``t`` on the plane with ``normal`` (2 HALF_PX + 1
+    square, the click at its centre), and the strip column of that centre; a decline reason
+    instead when the plane or patch does not map."""
     h = HALF_PX
-    hom = plane_homography(ref.camera, tgt.camera, origin + t * ray, -ref.camera.direction,
+    hom = plane_homography(ref.camera, tgt.camera, origin + t * ray, normal,
                            ref.origin, tgt.origin, click, 2.0 * h)
     if hom is None:
         return "outside the view: the depth hint's plane is not seen by both views"
@@ -213,8 +218,76 @@ def warped_patch(ref: View, tgt: View, strip_from_target: np.ndarray, origin: Fl
     return templ, float(c[0])
 
 
+@dataclass(frozen=True)
+class Sweep:
+    """The NCC of the strip against the patch warped for each depth of the sweep on one plane
+    orientation: ``score`` (rows: offsets from the line, columns along it), the warped
+    patches and, per column, the patch that scored it."""
+
+    score: np.ndarray
+    templates: list[np.ndarray]
+    owner: np.ndarray
+
+    @property
+    def peak(self) -> float:
+        return float(self.score.max())
+
+
+def sweep(ref: View, tgt: View, strip: np.ndarray, strip_from_target: np.ndarray,
+          origin: FloatArray, ray: FloatArray, normal: FloatArray, click: FloatArray,
+          depths: FloatArray) -> Sweep | str:
+    """NCC along the strip of the patch warped for each depth on planes with ``normal``
+    (each warp scores the columns nearest its depth's own); a reason when no warp maps (a
+    depth whose plane maps the patch beyond the reference image, e.g. one very close to the
+    target camera, is left out and its columns go to the nearest depth that maps)."""
+    h = HALF_PX
+    templates, columns, reasons = [], [], []
+    for t in depths.tolist():
+        got = warped_patch(ref, tgt, strip_from_target, origin, ray, t, normal, click)
+        if isinstance(got, str):
+            reasons.append(got)
+            continue
+        templates.append(got[0])
+        columns.append(got[1] - h)                      # score column of that depth
+    if not templates:
+        return reasons[0]
+    n_cols = strip.shape[1] - 2 * h
+    owner = np.abs(np.arange(n_cols)[:, None] - np.array(columns)[None, :]).argmin(axis=1)
+    score = np.full((strip.shape[0] - 2 * h, n_cols), -1.0, dtype=np.float32)
+    for j in np.unique(owner).tolist():
+        cols = np.flatnonzero(owner == j)
+        c0, c1 = int(cols[0]), int(cols[-1])
+        part = cv2.matchTemplate(strip[:, c0:c1 + 2 * h + 1], templates[j],
+                                 cv2.TM_CCOEFF_NORMED)
+        score[:, c0:c1 + 1] = np.where(owner[c0:c1 + 1] == j, part, score[:, c0:c1 + 1])
+    return Sweep(np.nan_to_num(np.clip(score, -1.0, 1.0), nan=-1.0), templates, owner)
+
+
+def plane_normals(ref: Camera, tgt: Camera, point: FloatArray, normal: FloatArray | None
+                  ) -> list[FloatArray]:
+    """The plane orientations tried: the surface normal when known (and not seen edge-on by
+    either camera), the plane parallel to the reference image, and the plane facing both
+    cameras alike (normal along the bisector of the two lines of sight, the least distortion
+    for a wide baseline whose surface is unknown); near-duplicates dropped."""
+    to_ref = ref.position - point
+    to_tgt = tgt.position - point
+    to_ref, to_tgt = to_ref / np.linalg.norm(to_ref), to_tgt / np.linalg.norm(to_tgt)
+    out: list[FloatArray] = []
+    if normal is not None:
+        n = np.asarray(normal, dtype=np.float64)
+        n = n / np.linalg.norm(n)
+        n = n if n @ to_ref >= 0 else -n
+        if n @ to_ref > EDGE_ON and n @ to_tgt > EDGE_ON:
+            out.append(n)
+    bisector = to_ref + to_tgt
+    for n in (-ref.direction, bisector / max(float(np.linalg.norm(bisector)), 1e-12)):
+        if all(float(n @ m) < SAME_PLANE for m in out):
+            out.append(np.asarray(n, dtype=np.float64))
+    return out
+
+
 def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: float,
-                  depth: float) -> MatchResult:
+                  depth: float, normal: FloatArray | None = None) -> MatchResult:
     """The click of the reference view found in the target view (module docstring).
 
     ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
@@ -259,29 +332,17 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     strip = cv2.warpAffine(tgt.image, a[:2], (strip_w, strip_h),
                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                            borderMode=cv2.BORDER_REPLICATE)
-    # the patch warped for each depth of the sweep; each scores the columns nearest to it
-    # (a depth whose plane maps the patch beyond the reference image, e.g. one very close to
-    # the target camera, is left out; its columns go to the nearest depth that maps)
-    templates, columns, reasons = [], [], []
-    for t in depth_samples(near, far, depth).tolist():
-        got = warped_patch(ref, tgt, np.linalg.inv(a), o, d, t, click)
-        if isinstance(got, str):
-            reasons.append(got)
-            continue
-        templates.append(got[0])
-        columns.append(got[1] - h)                      # score column of that depth
-    if not templates:
-        return declined(reasons[0])
-    n_cols = n_s + 2 * ext
-    owner = np.abs(np.arange(n_cols)[:, None] - np.array(columns)[None, :]).argmin(axis=1)
-    score = np.full((2 * (b + ext) + 1, n_cols), -1.0, dtype=np.float32)
-    for j in np.unique(owner).tolist():
-        cols = np.flatnonzero(owner == j)
-        c0, c1 = int(cols[0]), int(cols[-1])
-        part = cv2.matchTemplate(strip[:, c0:c1 + 2 * h + 1], templates[j],
-                                 cv2.TM_CCOEFF_NORMED)
-        score[:, c0:c1 + 1] = np.where(owner[c0:c1 + 1] == j, part, score[:, c0:c1 + 1])
-    score = np.nan_to_num(np.clip(score, -1.0, 1.0), nan=-1.0)
+    # the patch warped for each depth of the sweep and each plane orientation tried; the
+    # orientation whose warp matches best is kept
+    strip_from_target = np.linalg.inv(a)
+    depths = depth_samples(near, far, depth)
+    tried = [(n, sweep(ref, tgt, strip, strip_from_target, o, d, n, click, depths))
+             for n in plane_normals(ref.camera, tgt.camera, o + depth * d, normal)]
+    found = [(n, sw) for n, sw in tried if isinstance(sw, Sweep)]
+    if not found:
+        return declined(next(sw for _, sw in tried if isinstance(sw, str)))
+    normal_used, best = max(found, key=lambda item: item[1].peak)
+    score, templates, owner = best.score, best.templates, best.owner
     # rows: offsets -(b+ext)..(b+ext) from the line; columns: -ext..n_s-1+ext along it
     inner = score[ext:ext + 2 * b + 1, ext:ext + n_s]
     w_pk, s_pk = (int(v) for v in np.unravel_index(int(np.argmax(inner)), inner.shape))
@@ -310,7 +371,7 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     coarse = p0 + (s_pk + ds) * u + (w_pk - b + dw) * v + tgt.origin + 0.5
     t_pk = closest_on_first(o, d, tgt.camera.position, tgt.camera.pick_ray(coarse)[0])
     if math.isfinite(t_pk) and t_pk > 0:
-        got = warped_patch(ref, tgt, np.linalg.inv(a), o, d, t_pk, click)
+        got = warped_patch(ref, tgt, strip_from_target, o, d, t_pk, normal_used, click)
         templ = templ if isinstance(got, str) else got[0]
     ds, dw = refine(templ, strip, rs, rw, ds, dw)
     s, w = s_pk + ds, w_pk - b + dw

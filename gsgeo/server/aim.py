@@ -51,6 +51,9 @@ class DepthAnswer(BaseModel):
     far_m: float | None
     n_splats: int
     reason: str | None
+    normal_ecef: list[float] | None = Field(
+        None, description="unit normal of the splats' surface there, facing the ray's origin "
+                          "(rendered ECEF); null where the splats are not flat or disagree")
 
 
 def scene_folder(request: Request, scene: str) -> Path:
@@ -108,6 +111,9 @@ class DepthRange(BaseModel):
     near_m: Metres
     far_m: Metres
     depth_m: Metres
+    normal_ecef: Vec3 | None = Field(
+        None, description="the surface normal from /depth (rendered ECEF): the patch is warped "
+                          "by that plane too")
 
 
 class MatchRequest(BaseModel):

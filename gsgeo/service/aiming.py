@@ -82,16 +82,22 @@ def match_views(reference: dict[str, Any], target: dict[str, Any],
                 depth: dict[str, Any]) -> dict[str, Any]:
     """The reference click found in the target view (gsgeo.aim.match.match_feature), as the
     JSON of POST /api/match. ``depth`` holds near_m, far_m and depth_m along the reference
-    ray (metres, from /depth); InputError names the field of a value that cannot be used."""
+    ray (metres, from /depth) and optionally its normal_ecef; InputError names the field of a
+    value that cannot be used."""
     near, far, hint = (float(depth[k]) for k in ("near_m", "far_m", "depth_m"))
     if not 0.0 <= near <= far:
         raise InputError("near_m must be >= 0 and <= far_m", field="depth.near_m")
     if not near <= hint <= far:
         raise InputError("depth_m must lie between near_m and far_m", field="depth.depth_m")
+    normal = depth.get("normal_ecef")
+    if normal is not None and not np.linalg.norm(normal) > 1e-9:
+        raise InputError("must be a non-zero vector", field="depth.normal_ecef")
     ref = view_of(reference, "reference")
     tgt = view_of(target, "target")
     pixel = np.asarray(reference["pixel"], dtype=np.float64)
-    return match_feature(ref, pixel, tgt, near, far, hint).to_json()
+    return match_feature(ref, pixel, tgt, near, far, hint,
+                         None if normal is None else np.asarray(normal, dtype=np.float64)
+                         ).to_json()
 
 
 def views_for_point(scene_dir: Path, rays: Rays, point: Any, k: int, fovy: float,
