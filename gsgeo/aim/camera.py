@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -78,9 +79,12 @@ class Camera:
             u = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
         return cls(pos, d, u / np.linalg.norm(u), float(fovy), float(width), float(height))
 
-    @property
+    @cached_property
     def right(self) -> FloatArray:
-        return np.cross(self.direction, self.up)
+        """direction x up (unit), made once: every projection needs it."""
+        d, u = self.direction, self.up
+        return np.array([d[1] * u[2] - d[2] * u[1], d[2] * u[0] - d[0] * u[2],
+                         d[0] * u[1] - d[1] * u[0]])
 
     @property
     def focal_px(self) -> float:

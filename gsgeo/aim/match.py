@@ -58,8 +58,8 @@ MIN_TEXTURE = 2.0
 DEPTH_SLACK = 0.02
 #: The plane sweep: a new warp of the patch each time the depth grows by this factor, and
 #: at most this many warps per match.
-SWEEP_RATIO = 1.05
-MAX_TEMPLATES = 24
+SWEEP_RATIO = 1.1
+MAX_TEMPLATES = 16
 #: A known surface normal is used unless a camera sees the plane this edge-on (cosine), and
 #: plane orientations closer than this (cosine) count as one.
 EDGE_ON = 0.2
