@@ -4,24 +4,28 @@ segment (OpenCV).
 1. The reference ray through the click, and its segment near..far (from the depth hint),
    projected into the target view: the epipolar segment, cut to the part in front of the
    target camera and to the target image (less the template's reach).
-2. The patch around the click is warped into the target view by the homography of the
-   plane through the depth-hint point facing the reference camera: parallel to its image
-   plane (normal = the camera's viewing direction), as plane-sweep stereo assumes. The
-   surface's true orientation is unknown from one view; this plane is exact for a surface
-   seen square-on, which is what an operator picks a view for, and it carries the view
-   change's rotation, scale and foreshortening into the patch, which is what makes oblique
-   views match (a plain patch at 60 degrees scores far lower, see the tests). When near..far
-   is wide (a click on a thin object's edge, its background behind) the hint may be far from
-   the feature, so the patch is warped for a sweep of depths from near to far and each warp
-   scores the part of the segment its depth projects to.
+2. The patch around the click is warped into the target view by the homography of a plane
+   through the depth-hint point. Which plane: the surface's own when the depth hint gives
+   its normal (the flat splats there); else, and in any case as alternatives, the plane
+   parallel to the reference image (normal = its viewing direction, as plane-sweep stereo
+   assumes: exact for a surface seen square-on, which is what an operator picks a view for)
+   and the plane facing both cameras alike (normal along the bisector of the two lines of
+   sight: the least distortion for a wide baseline whose surface is unknown, where the
+   first one is seen nearly edge-on by the target). Each is tried and the one whose warp
+   matches best is kept. The warp carries the view change's rotation, scale and
+   foreshortening into the patch, which is what makes oblique views match (a plain patch at
+   60 degrees scores far lower, see the tests). When near..far is wide (a click on a thin
+   object's edge, its background behind) the hint may be far from the feature, so the patch
+   is warped for a sweep of depths from near to far and each warp scores the part of the
+   segment its depth projects to.
 3. The target image is resampled into a strip along the segment (``cv2.warpAffine``), the
    warped patch in the same frame (``cv2.warpPerspective``), so the search is the band of
    BAND_PX either side of the line, and ``cv2.matchTemplate`` (normalised cross-correlation,
    TM_CCOEFF_NORMED) scores every position at once.
 4. The peak is refined to sub-pixel (a parabola through it and its neighbours, then the
    translation that best aligns patch and strip, ``cv2.findTransformECC``) and mapped back
-   to window coordinates; its depth along the reference ray is
-   where the target's pick ray through it comes closest.
+   to window coordinates; its depth along the reference ray is where the target's pick ray
+   through it comes closest.
 
 A match is declined (``ok`` False, ``reason`` says why) when the patch has no texture or the
 peak is weak, when another peak away from the main one is nearly as high (ambiguous) or
@@ -291,7 +295,8 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     """The click of the reference view found in the target view (module docstring).
 
     ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
-    reference ray (near <= depth <= far)."""
+    reference ray (near <= depth <= far); ``normal``: the surface's normal there (rendered
+    ECEF, any length; either sign) when known."""
     h, b = HALF_PX, BAND_PX
     click = np.asarray(click, dtype=np.float64)
     o = ref.camera.position
