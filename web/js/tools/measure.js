@@ -11,6 +11,7 @@ import { $, fixed, h, mm } from "../format.js";
 import { applyPoint, norm, sub } from "../linalg.js";
 import { captureRay, raysInCurrentFrame } from "../rays.js";
 import { hitsNothing, refresh as refreshGuide, requestDepth } from "../guide.js";
+import { autoAim, autoAimPanel, autoAimResult, rayBadge, rememberReference } from "../autoaim.js";
 
 const Cesium = window.Cesium;
 
@@ -97,7 +98,7 @@ function render(ctx, busy = false) {
     const outlier = rr && rr.outlier;
     const noHit = !excluded && hitsNothing(ray);
     return h("tr", { class: excluded ? "excluded" : (outlier || noHit ? "outlier" : "") },
-      h("td", noHit ? { title: noHitText(m, i) } : {}, `${i + 1}${outlier ? " ⚑ outlier" : ""}${noHit ? " ⚠ hits no splat (sky?)" : ""}`),
+      h("td", noHit ? { title: noHitText(m, i) } : {}, `${i + 1}${outlier ? " ⚑ outlier" : ""}${noHit ? " ⚠ hits no splat (sky?)" : ""}`, ...rayBadge(ray)),
       h("td", { class: "num" }, rr ? fixed(rr.residual_px, 2) : "—"),
       h("td", { class: "num" }, rr ? mm(rr.residual_m) : "—"),
       h("td", {}, h("button", { onclick: () => toggleExclude(ctx, i), title: excluded ? "use this ray again" : "leave this ray out of the solution" }, excluded ? "restore" : "exclude")));
@@ -115,6 +116,8 @@ function render(ctx, busy = false) {
   } else {
     live.textContent = busy ? "solving…" : (m.rays.length < 2 ? `Needs at least 2 rays (${m.rays.length} so far).` : "");
   }
+  const auto = autoAimPanel(m);
+  if (auto) live.append(auto);
   const sky = noHitRays(m);
   if (sky.length) live.append(h("div", { class: "warn" }, ...sky.map((i) => h("div", {}, `⚠ ${noHitText(m, i)}.`))));
   draw(ctx);
@@ -213,6 +216,8 @@ const measure = {
     // the scene's georeference version the rays are taken in, stored with the point
     if (!m.rays.length) m.georefVersion = ctx.georefVersion();
     m.rays.push(ray);
+    // the canvas around ray 1's pixel: auto-aim's reference (A)
+    if (m.rays.length === 1 && !m.editing) rememberReference(ctx, ray);
     // a click on the sky: said at once, and the ray stays flagged in its row and the solution
     requestDepth(ctx, ray).then((d) => {
       if (!d || d.hit !== false || ctx.state.measure !== m || !m.rays.includes(ray)) return;
@@ -222,6 +227,13 @@ const measure = {
     });
     solveLive(ctx);
     ctx.updateStatus();
+  },
+
+  /** A: auto-aim (autoaim.js) adds the rays it finds in suggested views. */
+  key(ctx, event) {
+    if (event.key !== "a" && event.key !== "A") return false;
+    autoAim(ctx, (raysAdded) => { if (raysAdded) solveLive(ctx); else render(ctx); });
+    return true;
   },
 
   /** Backspace: remove the last ray. */
@@ -283,6 +295,8 @@ const measure = {
     else text = `${n} rays on ${name}. Click the feature from another viewpoint for ray ${n + 1}, or press Enter to store it. Backspace removes ray ${n}, Esc cancels.`;
     const sky = noHitRays(m);
     if (sky.length) text = `${noHitText(m, sky[0])}. ${n} rays on ${name}; Esc cancels.`;
+    const auto = autoAimResult(m);
+    if (auto && auto.text) text = auto.running ? auto.text : `${auto.text} ${text}`;
     return { text, className: "measuring" };
   },
 
