@@ -7,7 +7,11 @@ Everything is in the tileset's own ECEF (EPSG:4978 as the tileset places it, met
 before the viewer's modelMatrix.
 
 A tileset refined by ADD (as ``gsgeo tiles`` writes it) holds every splat in exactly one
-tile, so the union of all tiles is the scene at full detail.
+tile, so the union of all tiles is the scene at full detail (a REPLACE tileset's coarse
+levels would be counted on top of its fine ones).
+
+The splats are stored in Z-order (the widest 5 % apart), in blocks of BLOCK with a box each:
+a ray query first keeps the blocks whose box it passes, then tests only their splats.
 """
 
 from __future__ import annotations
@@ -146,13 +150,6 @@ class SplatIndex:
             np.minimum(t_out, t2, out=t_out)
         return np.flatnonzero(t_out >= t_in)
 
-    def blocks_near_point(self, point: np.ndarray, radius: float) -> np.ndarray:
-        """Block numbers whose box comes within ``radius`` metres of a point (offsets)."""
-        lo, hi = self.blocks
-        p = np.asarray(point, dtype=np.float64)
-        gap = np.maximum(np.maximum(lo - p, p - hi), 0.0)
-        return np.flatnonzero((gap * gap).sum(axis=1) <= radius * radius)
-
     @classmethod
     def from_arrays(cls, positions: np.ndarray, sigmas: np.ndarray, quats: np.ndarray,
                     alpha: np.ndarray) -> SplatIndex:
@@ -167,9 +164,8 @@ class SplatIndex:
             & np.isfinite(qn) & (qn > 0) & np.isfinite(a) & (a > 0)
         p, s, q, a, qn = p[ok], s[ok], q[ok], a[ok], qn[ok]
         # Z-order, the largest splats apart at the end: they would swell every block's box
-        big = EXTENT_SIGMAS * s.max(axis=1, initial=0.0) > np.quantile(
-            EXTENT_SIGMAS * s.max(axis=1, initial=0.0), BIG_QUANTILE) if len(s) else \
-            np.zeros(0, dtype=bool)
+        widest = s.max(axis=1, initial=0.0)
+        big = widest > np.quantile(widest, BIG_QUANTILE) if len(s) else widest > 0
         order = np.concatenate([np.flatnonzero(~big)[morton_order(p[~big])],
                                 np.flatnonzero(big)[morton_order(p[big])]])
         p, s, q, a, qn = p[order], s[order], q[order], a[order], qn[order]
