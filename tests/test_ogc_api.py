@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from servertools import LONDON, ecef_of, rays_at, start_server
 
 from gsgeo.export.tables import CHECK_POINT_TYPES, LINE_TYPES, POLYGON_TYPES, RAY_TYPES
-from gsgeo.measure.schema import RECORD_KEYS
+from gsgeo.pointschema import EXPORT_KEYS
 from gsgeo.server.ogc.pages import PageCache
 from gsgeo.service import open_projects
 from gsgeo.service.checkpoints import CheckPointRow
@@ -104,7 +104,7 @@ def test_gdal_reads_the_points_in_crs84_with_their_attributes(server):
         assert row["code"] == rec["code"] and row["n_rays"] == rec["n_rays"]
         assert row["easting"] == pytest.approx(rec["easting"], abs=1e-6)
     # GDAL adds the feature id as a field "id"; then the export schema, in its order
-    assert list(df.columns[1:-1]) == list(RECORD_KEYS) and df.columns[0] == "id"
+    assert list(df.columns[1:-1]) == list(EXPORT_KEYS) and df.columns[0] == "id"
 
 
 def test_gdal_reads_the_points_in_the_grid_crs(server):
@@ -182,7 +182,7 @@ def test_items_carry_content_crs_and_match_the_records(server):
     for f in r.json()["features"]:
         rec = record(pts[f["id"]])
         assert f["geometry"]["coordinates"] == [rec["easting"], rec["northing"], rec["height"]]
-        assert list(f["properties"]) == list(RECORD_KEYS)
+        assert list(f["properties"]) == list(EXPORT_KEYS)  # the point schema, then provenance
     r = httpx.get(f"{server}/ogc/collections/t.points/items/P2")
     assert r.headers["content-crs"] == f"<{CRS84}>"
     rec = record(pts["P2"])

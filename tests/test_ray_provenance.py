@@ -120,6 +120,12 @@ def test_exports_count_clicked_and_automatic_rays_and_name_who_measured(client, 
     assert {f["properties"]["point_id"]: tuple(f["properties"][k] for k in PROVENANCE_KEYS)
             for f in feats} == want
 
+    # the OGC API's points say the same, paged and one by one
+    feats = client.get("/ogc/collections/p.points/items").json()["features"]
+    assert {f["id"]: tuple(f["properties"][k] for k in PROVENANCE_KEYS) for f in feats} == want
+    one = client.get("/ogc/collections/p.points/items/A").json()["properties"]
+    assert tuple(one[k] for k in PROVENANCE_KEYS) == want["A"]
+
     r = client.get("/api/projects/p/export", params={"format": "gpkg"})
     (tmp_path / "p.gpkg").write_bytes(r.content)
     df = pyogrio.read_dataframe(tmp_path / "p.gpkg", layer="points")

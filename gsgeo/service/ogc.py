@@ -3,7 +3,7 @@
 Collections are ``{pid}.points``, ``{pid}.lines``, ``{pid}.polygons``, ``{pid}.check_points``
 and ``{pid}.rays``, and ``{pid}.buildings`` (one feature per surface of an LoD2 building, id
 ``{building}~{surface index}``) while the project has buildings. Their properties are the
-export's (gsgeo.export.tables: RECORD_KEYS / POINT_TYPES for points, the GeoPackage layers'
+export's (gsgeo.export.tables: EXPORT_KEYS / POINT_TYPES for points, the GeoPackage layers'
 column types for the others), and their values
 come from the same code the export uses (``collect``), so a feature says what the export says.
 
@@ -43,7 +43,7 @@ from gsgeo.export.tables import (
 )
 from gsgeo.georef.control import grid_to_ecef
 from gsgeo.jsontypes import JSONObject
-from gsgeo.measure.schema import RECORD_KEYS
+from gsgeo.pointschema import EXPORT_KEYS, provenance
 from gsgeo.service.buildings import spec_point_ids
 from gsgeo.service.measuring import solve_settings
 from gsgeo.service.projects import Projects, check_points_in_grid, feature_measures
@@ -52,7 +52,7 @@ from gsgeo.store.records import NotFoundError, Project
 
 #: The layers every project offers, in order, with their properties' types.
 LAYERS: dict[str, dict[str, str]] = {
-    "points": {k: POINT_TYPES[k] for k in RECORD_KEYS},
+    "points": {k: POINT_TYPES[k] for k in EXPORT_KEYS},
     "lines": LINE_TYPES,
     "polygons": POLYGON_TYPES,
     "check_points": CHECK_POINT_TYPES,
@@ -298,7 +298,7 @@ class FeatureService:
                                         else ("lon", "lat")) + box[1:])
                 n = tx.count_point_records(c.project.id, where)
                 rows = tx.page_point_records(c.project.id, where, q.offset, q.limit)
-                feats = [point_feature(r.id, r.record, out) for r in rows]
+                feats = [point_feature(r.id, r.record | r.provenance, out) for r in rows]
                 stamps = [r.updated_at for r in rows]
             else:
                 every, stamps = self._layer(tx, c, out, q.start, q.end, box)
@@ -316,7 +316,8 @@ class FeatureService:
             if c.layer == "points":
                 pt = tx.get_point(c.project.id, fid)
                 if pt is not None and pt.record is not None:
-                    return ItemPage([point_feature(pt.id, pt.record, out)], 1, out,
+                    return ItemPage([point_feature(pt.id, pt.record | provenance(
+                        pt.rays, pt.measured_by), out)], 1, out,
                                     max(pt.updated_at, c.project.updated_at))
             else:
                 every, stamps = self._layer(tx, c, out)

@@ -19,10 +19,11 @@ import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import AbstractContextManager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 
 from gsgeo.jsontypes import JSON, JSONObject
+from gsgeo.pointschema import provenance
 from gsgeo.store.accountrecords import AuditEntry, UserRecord
 from gsgeo.store.records import (
     BuildingRecord,
@@ -92,11 +93,14 @@ class PointFilter:
 
 @dataclass(frozen=True)
 class PointRow:
-    """A solved point as a page of records gives it: id, point-schema record, last change."""
+    """A solved point as a page of records gives it: id, point-schema record, last change,
+    and its provenance (gsgeo.pointschema.PROVENANCE_KEYS: who measured it, its rays
+    clicked and matched automatically)."""
 
     id: str
     record: JSONObject
     updated_at: str
+    provenance: JSONObject = field(default_factory=dict)
 
 
 def result_rows(points: Iterable[PointRecord], now: str, dumps: Callable[[JSON], str]
@@ -172,10 +176,11 @@ class Transaction(ABC):
                            limit: int | None = None) -> list[PointRow]:
         """One page of the solved points passing ``where``, in creation order: ``offset``
         rows skipped, at most ``limit`` (None: all) returned, each with its record only
-        (not the whole stored result). This default reads every point; a backend reads only
+        (not the whole stored result) and its provenance. This default reads every point; a backend reads only
         the page."""
         f = where or PointFilter()
-        rows = [PointRow(p.id, p.record, p.updated_at) for p in self.list_points(pid)
+        rows = [PointRow(p.id, p.record, p.updated_at, provenance(p.rays, p.measured_by))
+                for p in self.list_points(pid)
                 if p.record is not None and f.matches(p.record)]
         return rows[offset:] if limit is None else rows[offset:offset + limit]
 

@@ -269,14 +269,19 @@ class PostgresTransaction(Transaction):
         cond, args = _point_where(pid, where)
         # the result as text, parsed here: json keeps its numbers exactly as written
         rows = self.con.execute(
-            sql.SQL("SELECT id, updated_at, result::text AS result FROM points WHERE {}"
-                    " ORDER BY seq LIMIT %s OFFSET %s").format(cond),
+            sql.SQL("SELECT id, updated_at, result::text AS result, measured_by,"
+                    " json_array_length(rays) AS n, (SELECT count(*) FROM"
+                    " json_array_elements(rays) e WHERE e->>'auto' = 'true') AS auto"
+                    " FROM points WHERE {} ORDER BY seq LIMIT %s OFFSET %s").format(cond),
             nul_free([*args, limit, offset])).fetchall()
         out = []
         for r in rows:
             result = orjson.loads(r["result"])
+            auto = int(r["auto"])
             out.append(PointRow(r["id"], {k: result.get(k) for k in RECORD_KEYS},
-                                r["updated_at"]))
+                                r["updated_at"], {"measured_by": r["measured_by"],
+                                                  "n_rays_clicked": int(r["n"]) - auto,
+                                                  "n_rays_auto": auto}))
         return out
 
     def get_point(self, pid: str, point_id: str) -> PointRecord | None:

@@ -65,6 +65,9 @@ def _loads(text: str | None) -> JSON:
 #: One json_extract call gives a point's record as a JSON array, in RECORD_KEYS order: the
 #: stored result is parsed once, in C, and the rest of it (rays, covariances) never reaches Python.
 RECORD_SQL = "json_extract(result, " + ", ".join(f"'$.{k}'" for k in RECORD_KEYS) + ")"
+#: How many of a point's rays were matched automatically ("auto": true; gsgeo.pointschema).
+AUTO_RAYS_SQL = ("SELECT count(*) FROM json_each(points.rays)"
+                 " WHERE json_type(json_each.value, '$.auto') = 'true'")
 
 
 EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
@@ -210,10 +213,13 @@ class SQLiteTransaction(Transaction):
                            limit: int | None = None) -> list[PointRow]:
         sql, args = _point_where(pid, where)
         rows = self.con.execute(
-            f"SELECT id, updated_at, {RECORD_SQL} FROM points WHERE {sql} ORDER BY seq"
+            f"SELECT id, updated_at, {RECORD_SQL}, measured_by, json_array_length(rays),"
+            f" ({AUTO_RAYS_SQL}) FROM points WHERE {sql} ORDER BY seq"
             " LIMIT ? OFFSET ?", [*args, -1 if limit is None else limit, offset]).fetchall()
         keys = RECORD_KEYS
-        return [PointRow(r[0], dict(zip(keys, orjson.loads(r[2]), strict=True)), r[1])
+        return [PointRow(r[0], dict(zip(keys, orjson.loads(r[2]), strict=True)), r[1],
+                         {"measured_by": r[3], "n_rays_clicked": r[4] - r[5],
+                          "n_rays_auto": r[5]})
                 for r in rows]
 
     def get_point(self, pid: str, point_id: str) -> PointRecord | None:
