@@ -130,9 +130,9 @@ def measure(page, pid: str, target) -> dict:
         a = aim(page, target, view)
         page.mouse.click(a["x"], a["y"])
         page.wait_for_function(f"gsgeo.state.measure.rays.length === {i + 1}")
-    page.click("#pt-id")
-    page.keyboard.press("Control+A")
-    page.keyboard.type(pid)
+    page.keyboard.press("Enter")  # asks for the id
+    page.wait_for_selector("#id-prompt:not([hidden])")
+    page.fill("#id-prompt-input", pid)
     with page.expect_response(lambda r: r.url.endswith("/points") and r.request.method == "POST") as resp:
         page.keyboard.press("Enter")
     assert resp.value.status == 201, resp.value.text()

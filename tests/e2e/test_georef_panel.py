@@ -287,6 +287,8 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
         assert aim["dist"] < 1e-5, aim
         p.mouse.click(aim["x"], aim["y"])
         p.wait_for_function(f"gsgeo.state.measure.rays.length === {i + 1}")
+    p.keyboard.press("Enter")  # asks for the id
+    p.wait_for_selector("#id-prompt:not([hidden])")
     with p.expect_response(lambda r: r.url.endswith(f"/projects/{PID}/points")
                            and r.request.method == "POST") as resp:
         p.keyboard.press("Enter")

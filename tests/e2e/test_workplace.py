@@ -165,6 +165,8 @@ def _measure(p: Page, target_rendered, views, code: str = "") -> dict:
             p.wait_solution()
     if code:
         p.page.fill("#pt-code", code)
+    p.page.keyboard.press("Enter")  # asks for the id (the next P<n>: no check point is near)
+    p.page.wait_for_selector("#id-prompt:not([hidden])")
     with p.page.expect_response(_posted("points")) as resp:
         p.page.keyboard.press("Enter")
     assert resp.value.status == 201, resp.value.text()
@@ -228,6 +230,9 @@ def test_create_project_and_measure_known_point(server, browser):
         p.page.keyboard.press("e")
         p.page.fill("#pt-code", "roof corner")
         p.page.focus("#pt-code")
+        p.page.keyboard.press("Enter")  # asks for the id, offering the next free one
+        p.page.wait_for_selector("#id-prompt:not([hidden])")
+        assert p.page.input_value("#id-prompt-input") == "P1"
         with p.page.expect_response(_posted("points")) as resp:
             p.page.keyboard.press("Enter")
         stored = resp.value.json()

@@ -1,8 +1,9 @@
 // Scene graphics: rays, point markers, error ellipsoids, lines and polygons, all in the
 // rendered ECEF frame (georeferenced ECEF carried through the tileset's current modelMatrix).
 
-import { eigSym3, transformCovariance, applyPoint } from "./linalg.js";
+import { eigSym3, transformCovariance, applyPoint, norm, sub } from "./linalg.js";
 import { Overlay } from "./overlay.js";
+import { QUALITY_COLORS, SCALE_95_3D, exaggeration, quality } from "./quality.js";
 
 const Cesium = window.Cesium;
 
@@ -22,8 +23,7 @@ export const COLORS = {
   GroundSurface: Cesium.Color.fromCssColorString("#8a939b"),
 };
 
-/** The 3-D confidence scale of a drawn ellipsoid: 95 % (sqrt of chi-square(3) 0.95) or 1 sigma. */
-export const SCALE_95_3D = 2.7955;
+export { SCALE_95_3D };
 
 export function cart(p) {
   return new Cesium.Cartesian3(p[0], p[1], p[2]);
@@ -38,12 +38,17 @@ export function ellipsoidAxes(cov, k) {
 }
 
 export class Drawer {
-  constructor(viewer) {
+  /** `changed()` is called whenever what is drawn changes (the page renders on demand). */
+  constructor(viewer, changed = () => {}) {
     this.viewer = viewer;
+    this.changed = changed;
     this.ds = new Cesium.CustomDataSource("gsgeo");
     viewer.dataSources.add(this.ds);
     this.groups = new Map();
     this.overlay = new Overlay(viewer, document.getElementById("viewer-wrap"), document.getElementById("status"));
+    this.overlay.changed = changed;
+    this.trueSize = false; // ellipsoids at true size, else exaggerated to be seen (ellipsoid())
+    this.ellipsoids = new Map(); // group -> what ellipsoid() drew last, for the on-screen badge
   }
 
   clear(group) {
@@ -51,12 +56,15 @@ export class Drawer {
     for (const e of list) this.ds.entities.remove(e);
     this.groups.set(group, []);
     this.overlay.clear(group);
+    if (this.ellipsoids.delete(group)) this.badge();
+    this.changed();
   }
 
   add(group, options) {
     const e = this.ds.entities.add(options);
     if (!this.groups.has(group)) this.groups.set(group, []);
     this.groups.get(group).push(e);
+    this.changed();
     return e;
   }
 
@@ -100,25 +108,54 @@ export class Drawer {
   }
 
   /** The error ellipsoid of a point: georeferenced ECEF point and covariance (m^2), drawn through
-   *  the model matrix `mm` (column-major) at confidence scale k. Returns the semi-axes (m). */
-  ellipsoid(group, pointGeo, covGeo, mm, k, color) {
+   *  the model matrix `mm` (column-major) at confidence scale k, coloured by its 95 % 3-D radius
+   *  against the tolerance (quality.js) and, unless `trueSize` is set, exaggerated by a 1-2-5
+   *  factor until it is some 24 px across at the camera's present range. Returns {radii (m, true
+   *  size, at scale k), scale (the exaggeration), r95 (m), quality}. */
+  ellipsoid(group, pointGeo, covGeo, mm, k) {
     const p = applyPoint(mm, pointGeo);
     const cov = transformCovariance(mm, covGeo);
     const { radii, vectors } = ellipsoidAxes(cov, k);
-    if (!radii.every((r) => Number.isFinite(r) && r > 0)) return radii;
-    // the three principal sections, drawn at true size
-    const css = color.toCssColorString();
+    const info = { radii, scale: 1, r95: NaN, quality: null };
+    if (!radii.every((r) => Number.isFinite(r) && r > 0)) return info;
+    info.r95 = (radii[0] * SCALE_95_3D) / k;
+    info.quality = quality(info.r95);
+    const camera = this.viewer.camera;
+    const cam = camera.positionWC;
+    const fovy = camera.frustum instanceof Cesium.PerspectiveFrustum ? camera.frustum.fovy : NaN;
+    info.scale = this.trueSize ? 1
+      : exaggeration(radii[0], norm(sub(p, [cam.x, cam.y, cam.z])), fovy, this.viewer.scene.canvas.clientHeight);
+    // the three principal sections
+    const css = QUALITY_COLORS[info.quality];
     for (const [a, b] of [[0, 1], [1, 2], [2, 0]]) {
       const ring = [];
       for (let i = 0; i < 48; i++) {
         const t = (2 * Math.PI * i) / 48;
-        const ca = radii[a] * Math.cos(t);
-        const sb = radii[b] * Math.sin(t);
-        ring.push([0, 1, 2].map((k) => p[k] + ca * vectors[a][k] + sb * vectors[b][k]));
+        const ca = info.scale * radii[a] * Math.cos(t);
+        const sb = info.scale * radii[b] * Math.sin(t);
+        ring.push([0, 1, 2].map((j) => p[j] + ca * vectors[a][j] + sb * vectors[b][j]));
       }
-      this.overlay.add(group, ring, { color: css, width: 1.5, closed: true });
+      this.overlay.add(group, ring, { color: css, width: 2, closed: true });
     }
-    return radii;
+    this.ellipsoids.set(group, { ...info, k });
+    this.badge();
+    this.changed();
+    return info;
+  }
+
+  /** The badge on the viewer says how the ellipsoid in view is drawn: the point being measured
+   *  first, else the selected point. */
+  badge() {
+    const el = document.getElementById("ellipsoid-badge");
+    if (!el) return;
+    const e = this.ellipsoids.get("current") || this.ellipsoids.get("selected");
+    el.hidden = !e;
+    if (!e) return;
+    el.className = e.quality || "";
+    el.textContent = `${e.scale === 1 ? "ellipsoid at true size" : `ellipsoid ×${e.scale}`}`
+      + ` · ${e.k === SCALE_95_3D ? "95 %" : "1σ"} · 95 % radius ${(e.r95 * 1000).toFixed(1)} mm: ${e.quality}`;
+    el.title = "colour by the 95 % 3-D radius: green up to 20 mm, amber up to 50 mm, red beyond; "
+      + "tick 'true size' to draw it without exaggeration";
   }
 
   /** A planar face through rendered positions (a ring, not closed), filled with `color` at

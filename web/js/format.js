@@ -62,3 +62,20 @@ export function h(tag, attrs = {}, ...children) {
   }
   return el;
 }
+
+/** A point's height system in one phrase: the server's vertical_datum (e.g. "ellipsoidal
+ *  height on WGS 84 (EPSG:4979)"), with the height type only where the datum does not say it. */
+export function heightsText(heightType, verticalDatum) {
+  if (!verticalDatum) return heightType ? `${heightType} height` : "";
+  if (!heightType || verticalDatum.toLowerCase().includes(heightType.toLowerCase())) return verticalDatum;
+  return `${verticalDatum} (${heightType} height)`;
+}
+
+/** The warnings every solved point of `points` shares (two points at least): the project's,
+ *  e.g. a datum transformation accurate to 2 m only, shown once instead of on every point. */
+export function sharedWarnings(points) {
+  const lists = points.filter((p) => p.status === "solved" && p.result)
+    .map((p) => p.result.warnings || []);
+  if (lists.length < 2) return [];
+  return lists[0].filter((w, i, all) => all.indexOf(w) === i && lists.every((l) => l.includes(w)));
+}

@@ -6,12 +6,13 @@ import { api, download, ApiError } from "./api.js";
 import { Drawer, COLORS, SCALE_95_3D, cart } from "./draw.js";
 import { applyPoint, applyDirection, norm, sub, IDENTITY16 } from "./linalg.js";
 import { upsert, usesAny, without } from "./merge.js";
-import { $, fixed, mm, h, measuresText } from "./format.js";
+import { $, fixed, mm, h, measuresText, heightsText, sharedWarnings } from "./format.js";
 import { TOOLS, activeTool, activate, handlerOf, release, toolByShortcut } from "./tools/index.js";
 import { georefPanel } from "./georef.js";
 import { buildingsPanel } from "./buildings.js";
 import { georefVersion, moveCamera } from "./similarity.js";
 import { tileFailureText } from "./scenehost.js";
+import { RenderOnDemand, splatsShown } from "./render.js";
 import { installGuide } from "./guide.js";
 import { nextView } from "./views.js";
 
@@ -30,6 +31,8 @@ const state = {
   lines: [],
   polygons: [],
   checkPoints: 0,
+  checkPointList: [], // the project's check and control points as the server lists them
+  projectWarnings: [], // the warnings every stored point shares: shown once, above the list
   selected: null, // point id
   mode: "idle", // the active tool's id (tools/index.js): idle | measure | line | polygon
   measure: null, // the measure tool's point: {rays, excluded:Set, editing, pointId, solution, error, seq}
@@ -65,11 +68,15 @@ viewer.scene.globe.showGroundAtmosphere = false;
 viewer.scene.fog.enabled = false;
 viewer.cesiumWidget.screenSpaceEventHandler.removeInputAction(Cesium.ScreenSpaceEventType.LEFT_CLICK);
 viewer.cesiumWidget.screenSpaceEventHandler.removeInputAction(Cesium.ScreenSpaceEventType.LEFT_DOUBLE_CLICK);
-const draw = new Drawer(viewer);
+// the scene is drawn on demand (render.js): what changes the drawing asks for a frame
+const renderer = new RenderOnDemand(viewer, () => state.tileset);
+const draw = new Drawer(viewer, () => renderer.request());
 
 window.gsgeo = {
   viewer,
   Cesium,
+  draw,
+  renderer,
   get tileset() { return state.tileset; },
   get state() { return state; },
   /** the loaded tileset's georeference version (extras.gsgeo.georef.version, 0 when absent) */
@@ -141,8 +148,15 @@ async function loadScene(name, view = null) {
   }
   msg.hidden = true;
   $("#scene-select").value = name;
+  loading.scene = name;
+  loading.pending = 0;
+  showLoading();
   try {
     const tileset = await Cesium.Cesium3DTileset.fromUrl(info.url, { maximumScreenSpaceError: 8 });
+    tileset.loadProgress.addEventListener((pending, processing) => {
+      loading.pending = pending + processing;
+      showLoading();
+    });
     let hostFailed = false; // one message per scene load, not one per tile
     tileset.tileFailed.addEventListener((e) => {
       const text = tileFailureText(name, info.tiles_url, e, location.origin);
@@ -169,14 +183,31 @@ async function loadScene(name, view = null) {
       await viewer.zoomTo(tileset, new Cesium.HeadingPitchRange(0.4, -0.6, r * 2.2));
     }
   } catch (exc) {
+    loading.scene = null;
     msg.hidden = false;
     msg.textContent = `Scene '${name}' cannot be loaded: ${exc.message || exc}`;
   }
+  showLoading();
   setUrl();
   redrawAll();
   updateStatus();
   georef.banner();
 }
+
+// The loading indicator: from the start of a scene's load until its first splats are drawn,
+// and while tiles are pending afterwards.
+const loading = { scene: null, pending: 0 };
+
+function showLoading() {
+  if (loading.scene && state.tileset && state.sceneName === loading.scene && window.gsgeo.tilesReady
+      && splatsShown(state.tileset)) loading.scene = null;
+  const el = $("#loading");
+  el.hidden = !loading.scene && loading.pending === 0;
+  if (el.hidden) return;
+  const tiles = loading.pending ? ` (${loading.pending} tile${loading.pending === 1 ? "" : "s"} pending)` : "";
+  $("#loading-text").textContent = loading.scene ? `Loading scene '${loading.scene}'…${tiles}` : `Loading tiles…${tiles}`;
+}
+viewer.scene.postRender.addEventListener(() => { if (loading.scene) showLoading(); });
 
 /** The server changed the scene's root transform by similarity `sim16` (column-major, old
  *  ECEF -> new ECEF) and re-solved the points: reload the tileset, carry the camera by it
@@ -258,6 +289,7 @@ async function refreshProjectData() {
   state.lines = lines.lines;
   state.polygons = polys.polygons;
   state.checkPoints = cps.check_points.length;
+  state.checkPointList = cps.check_points;
   renderAll();
   await buildings.load();
   await refreshAccuracy();
@@ -308,6 +340,7 @@ function featureDeleted(kind, id) {
 }
 
 async function refreshAccuracy() {
+  $("#accuracy-section").hidden = !state.checkPoints;
   if (state.checkPoints) await loadAccuracy();
   else $("#accuracy").replaceChildren();
 }
@@ -437,6 +470,8 @@ const ctx = {
   buildingStored: (b) => buildings.stored(b),
   georefVersion: currentGeorefVersion,
   done: () => release(ctx),
+  // the active tool changed: whether the selected point's rays show depends on it
+  modeChanged: () => drawSelected(),
 };
 
 const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged });
@@ -451,10 +486,14 @@ function pointById(id) { return state.points.find((p) => p.id === id); }
 function renderPoints() {
   const tbody = $("#points-table tbody");
   $("#points-count").textContent = state.points.length ? `(${state.points.length})` : "";
+  state.projectWarnings = sharedWarnings(state.points);
+  const shared = $("#project-warnings");
+  shared.hidden = !state.projectWarnings.length;
+  shared.replaceChildren(...state.projectWarnings.map((w) => h("div", { title: "every point of this project has this warning" }, `⚠ every point: ${w}`)));
   const rows = state.points.map((p) => {
     const r = p.record || {};
     const grid = r.easting !== null && r.easting !== undefined;
-    const warns = (p.result && p.result.warnings) || [];
+    const warns = ownWarnings(p);
     const flag = p.status !== "solved" ? "✖" : (warns.length ? "⚠" : "");
     return h("tr", {
       "data-id": p.id, class: p.id === state.selected ? "selected" : "",
@@ -472,6 +511,11 @@ function renderPoints() {
     h("td", { class: flag === "✖" ? "error" : "warn" }, flag));
   });
   tbody.replaceChildren(...(rows.length ? rows : [h("tr", {}, h("td", { colspan: 9, class: "muted" }, "No points yet: press M to measure one."))]));
+}
+
+/** A point's warnings but those every point shares (shown once, above the list). */
+function ownWarnings(p) {
+  return ((p.result && p.result.warnings) || []).filter((w) => !state.projectWarnings.includes(w));
 }
 
 function onPointRowClick(id) {
@@ -530,7 +574,8 @@ function renderPointDetail() {
   if (p.status !== "solved") row("Error", p.error || "not solved");
   if (r.crs) {
     row("E / N / H", `${fixed(r.easting)} / ${fixed(r.northing)} / ${fixed(r.height)} m`);
-    row("CRS", `${r.crs}${r.vertical_datum ? " + " + r.vertical_datum : ""} (${r.height_type || ""} height)`);
+    row("CRS", r.crs);
+    row("Heights", heightsText(r.height_type, r.vertical_datum));
     row("σ E/N/H (1σ)", `${mm(r.sigma_e)} / ${mm(r.sigma_n)} / ${mm(r.sigma_h)} mm`);
     row("95 % ellipse", `${mm(r.ellipse_major_95)} × ${mm(r.ellipse_minor_95)} mm, bearing ${fixed(r.ellipse_bearing_deg, 1)}°`);
   }
@@ -539,7 +584,7 @@ function renderPointDetail() {
   row("Rays", `${r.n_rays ?? "—"} used${p.excluded.length ? `, ${p.excluded.length} excluded` : ""}; max angle ${fixed(r.max_angle_deg, 1)}°`);
   row("RMS / max res.", `${mm(r.rms_m)} mm / ${fixed(r.max_residual_px, 2)} px`);
   if (r.operation) row("Operation", `${r.operation}${r.operation_accuracy_m !== null && r.operation_accuracy_m !== undefined ? ` (±${r.operation_accuracy_m} m)` : ""}`);
-  const warns = res.warnings || [];
+  const warns = ownWarnings(p);
   const rays = (res.rays || []).map((rr) => h("tr", { class: rr.excluded ? "excluded" : (rr.outlier ? "outlier" : "") },
     h("td", {}, `${rr.index + 1}${rr.outlier ? " ⚑" : ""}`),
     h("td", { class: "num" }, fixed(rr.residual_px, 2)),
@@ -550,12 +595,48 @@ function renderPointDetail() {
   const delBtn = h("button", { class: "danger", onclick: (ev) => deletePoint(p.id, ev.currentTarget) }, "Delete");
   box.replaceChildren(
     h("div", { class: "kv" }, ...kv),
+    renameRow(p.id),
     warns.length ? h("div", { class: "warn" }, ...warns.map((w) => h("div", {}, `⚠ ${w}`))) : "",
     rays.length ? h("table", { class: "grid" }, h("thead", {}, h("tr", {}, h("th", {}, "Ray"), h("th", {}, "res px"), h("th", {}, "res mm"), h("th", {}, ""))), h("tbody", {}, ...rays)) : "",
     h("div", { class: "buttons" },
       h("button", { onclick: () => selectPoint(p.id, true) }, "Fly to"),
       h("button", { onclick: () => activate(ctx, "measure", p), title: "reopen: add rays to this point" }, "Add rays"),
+      h("button", { id: "btn-rename", onclick: () => openRename(), title: "give the point another id" }, "Rename"),
       delBtn));
+}
+
+/** The rename field of the point panel (hidden until Rename): Enter renames, Esc closes. */
+function renameRow(id) {
+  const input = h("input", { id: "rename-input", maxlength: "100", value: id, autocomplete: "off", spellcheck: "false" });
+  const error = h("span", { id: "rename-error", class: "error" });
+  input.addEventListener("keydown", (ev) => {
+    if (ev.key === "Enter") { ev.preventDefault(); renamePoint(id, input.value.trim(), error); }
+    else if (ev.key === "Escape") { ev.preventDefault(); ev.stopPropagation(); $("#rename-row").hidden = true; }
+  });
+  return h("div", { id: "rename-row", class: "rename", hidden: true },
+    h("label", {}, "New ID ", input),
+    h("button", { onclick: () => renamePoint(id, input.value.trim(), error) }, "Rename"), error);
+}
+
+function openRename() {
+  $("#rename-row").hidden = false;
+  $("#rename-error").textContent = "";
+  $("#rename-input").focus();
+  $("#rename-input").select();
+}
+
+/** PATCH the point's id (with If-Match, as every change); a taken id is said in the panel. */
+async function renamePoint(oldId, id, errorEl) {
+  if (!id || id === oldId) { $("#rename-row").hidden = true; return; }
+  if (pointById(id)) { errorEl.textContent = `${id} is taken by another point: choose another id.`; return; }
+  try {
+    const pt = await api("PATCH", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(oldId)}`, { id });
+    if (state.selected === oldId) state.selected = pt.id;
+    await pointStored(pt, oldId);
+    message(`Renamed ${oldId} to ${pt.id}.`);
+  } catch (exc) {
+    errorEl.textContent = exc.status === 409 ? `${id} is taken: ${exc.message}` : exc.message;
+  }
 }
 
 function drawPoints() {
@@ -647,6 +728,7 @@ async function importCheckPoints(ev) {
     // an import adds or replaces check points by id: the server counts them
     const cps = await api("GET", `/projects/${encodeURIComponent(state.project.id)}/checkpoints`);
     state.checkPoints = cps.check_points.length;
+    state.checkPointList = cps.check_points;
     await refreshAccuracy();
   } catch (exc) { fail(exc); }
 }
@@ -668,19 +750,22 @@ async function loadAccuracy() {
       box.replaceChildren(h("p", { class: "note", id: "accuracy-summary" },
         `${c.check_points} check points (${c.check_points_not_measured.slice(0, 12).join(", ")}`
         + `${c.check_points_not_measured.length > 12 ? ", …" : ""}); none measured yet. Give a measured point `
-        + "the ID of a check point (ID field while measuring) to compare it."));
+        + "the ID of a check point (asked at Enter while measuring) to compare it."));
       return;
     }
+    // H is the height here as everywhere in the viewer: the API's RMSE_H (horizontal) is shown
+    // as EN, its V (vertical) as H
     box.replaceChildren(
-      h("table", { class: "grid", id: "accuracy-table" },
+      h("div", { class: "table-wrap short" }, h("table", { class: "grid", id: "accuracy-table" },
         h("thead", {}, h("tr", {}, h("th", {}, "Point"), h("th", {}, "dE mm"), h("th", {}, "dN mm"), h("th", {}, "dH mm"), h("th", {}, "d3D mm"))),
-        h("tbody", {}, ...rows)),
+        h("tbody", {}, ...rows))),
       h("div", { class: "solution", id: "accuracy-summary" },
-        `RMSE E ${mm(s.RMSE_E)}  N ${mm(s.RMSE_N)}  H(horiz.) ${mm(s.RMSE_H)}  V ${mm(s.RMSE_V)}  3D ${mm(s.RMSE_3D)} mm\n`
-        + `ME   E ${mm(s.ME_E)}  N ${mm(s.ME_N)}  V ${mm(s.ME_V)} mm;  SD E ${mm(s.SD_E)}  N ${mm(s.SD_N)}  V ${mm(s.SD_V)} mm\n`
+        `RMSE E ${mm(s.RMSE_E)}  N ${mm(s.RMSE_N)}  EN ${mm(s.RMSE_H)}  H ${mm(s.RMSE_V)}  3D ${mm(s.RMSE_3D)} mm\n`
+        + `ME   E ${mm(s.ME_E)}  N ${mm(s.ME_N)}  H ${mm(s.ME_V)} mm;  SD E ${mm(s.SD_E)}  N ${mm(s.SD_N)}  H ${mm(s.SD_V)} mm\n`
         + `${c.matched} of ${c.check_points} check points measured`
         + (c.check_points_not_measured.length ? ` (not measured: ${c.check_points_not_measured.join(", ")})` : "")),
-      h("p", { class: "note" }, `${acc.units}. ${acc.heights}.`));
+      h("p", { class: "note", id: "accuracy-note" }, `Millimetres; differences are measured minus check; EN is the `
+        + `horizontal (2-D) RMSE. Heights: ${acc.heights}.`));
   } catch (exc) {
     box.replaceChildren(h("p", { class: "error" }, exc.message));
   }
@@ -837,6 +922,24 @@ function wire() {
   document.querySelectorAll("input[name=conf]").forEach((r) => r.addEventListener("change", () => setConf(r.value)));
   document.querySelectorAll("[data-export]").forEach((b) => b.addEventListener("click", () => exportAs(b.dataset.export)));
   $("#check-form").addEventListener("submit", importCheckPoints);
+  // (blurred: the keys go back to the tools)
+  $("#ellipsoid-true").addEventListener("change", (ev) => { draw.trueSize = ev.target.checked; ev.target.blur(); redrawAll(); });
+  // an exaggerated ellipsoid is sized for the camera's range: drawn again when the camera has
+  // moved (a redraw asks for a frame: only when there is an ellipsoid and a new pose)
+  let pose = "";
+  viewer.camera.moveEnd.addEventListener(() => {
+    const c = viewer.camera;
+    const now = [c.positionWC, c.directionWC].map((v) => `${v.x.toFixed(2)},${v.y.toFixed(2)},${v.z.toFixed(2)}`).join(";");
+    if (draw.trueSize || !draw.ellipsoids.size || now === pose) return;
+    pose = now;
+    redrawEllipsoids();
+  });
+}
+
+function redrawEllipsoids() {
+  drawSelected();
+  const tool = activeTool(state);
+  if (tool.redraw) tool.redraw(ctx);
 }
 
 /** ?lon=&lat= (WGS 84 degrees, as the QGIS plugin sends): look down at that place, at the

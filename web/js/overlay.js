@@ -1,6 +1,7 @@
 // A 2-D canvas over the Cesium canvas for rays, error ellipsoids, lines and polygons.
 // CesiumJS 1.145 hides entity polylines wherever Gaussian splats are drawn, so these
-// measuring graphics are projected by the camera here and drawn on top, every frame.
+// measuring graphics are projected by the camera here and drawn on top, every frame. The
+// page renders on demand: `changed()` (set by the owner) is called when the drawing changes.
 
 const Cesium = window.Cesium;
 
@@ -12,17 +13,22 @@ export class Overlay {
     container.insertBefore(this.canvas, before);
     this.ctx = this.canvas.getContext("2d");
     this.groups = new Map();
+    this.changed = () => {};
     this.view = new Cesium.Matrix4();
     viewer.scene.postRender.addEventListener(() => this.draw());
   }
 
-  clear(group) { this.groups.set(group, []); }
+  clear(group) {
+    this.groups.set(group, []);
+    this.changed();
+  }
 
   /** Add a 3-D polyline: points [[x, y, z], ...] in rendered ECEF (m); style {color, width, dash,
    *  closed, fill}: with `fill` (a CSS colour) a closed planar ring is filled, farthest first. */
   add(group, points, style) {
     if (!this.groups.has(group)) this.groups.set(group, []);
     this.groups.get(group).push({ points, ...style });
+    this.changed();
   }
 
   draw() {

@@ -68,6 +68,7 @@ export function activate(ctx, id, arg) {
   state.mode = tool.id;
   markButtons(state);
   tool.start(ctx, arg);
+  if (ctx.modeChanged) ctx.modeChanged();
   ctx.updateStatus();
   return true;
 }
@@ -76,5 +77,6 @@ export function activate(ctx, id, arg) {
 export function release(ctx) {
   ctx.state.mode = DEFAULT_TOOL.id;
   markButtons(ctx.state);
+  if (ctx.modeChanged) ctx.modeChanged();
   ctx.updateStatus();
 }

@@ -1,7 +1,8 @@
 // The measure tool (M): each click adds a ray from the camera through the clicked pixel; from
 // two rays on the server intersects them (/api/intersect) and the panel shows the solution,
-// its error ellipsoid and each ray's residual; Enter stores the point (new, or a stored point
-// reopened with "Add rays"). Its state is state.measure:
+// its error ellipsoid and each ray's residual; Enter asks for a new point's id (idprompt.js) and
+// Enter again stores it (a stored point reopened with "Add rays" is stored at once). Its state is
+// state.measure:
 // {rays, excluded: Set, editing, pointId, solution, error, seq, georefVersion}; a new point is
 // stored with the georeference version of the tileset its first ray was taken in.
 
@@ -10,6 +11,8 @@ import { COLORS, cart } from "../draw.js";
 import { $, fixed, h, mm } from "../format.js";
 import { applyPoint, norm, sub } from "../linalg.js";
 import { captureRay, raysInCurrentFrame } from "../rays.js";
+import { nextPointId } from "../pointid.js";
+import { closeIdPrompt, idError, idPromptOpen, openIdPrompt, promptedId } from "../idprompt.js";
 import { hitsNothing, refresh as refreshGuide, requestDepth } from "../guide.js";
 import { autoAim, autoAimPanel, autoAimResult, rayBadge, rememberReference } from "../autoaim.js";
 
@@ -23,18 +26,6 @@ function noHitText(m, i) {
 /** The indices of the rays known to hit no splat (and not excluded). */
 function noHitRays(m) {
   return m.rays.map((r, i) => i).filter((i) => !m.excluded.has(i) && hitsNothing(m.rays[i]));
-}
-
-/** The next free automatic point id P<n> (above every stored P<number>). */
-function nextPointId(points) {
-  const used = new Set(points.map((p) => p.id));
-  let n = 1;
-  for (const p of points) {
-    const m = /^P(\d+)$/.exec(p.id);
-    if (m) n = Math.max(n, Number(m[1]) + 1);
-  }
-  while (used.has(`P${n}`)) n++;
-  return `P${n}`;
 }
 
 function activeExcluded(m) {
@@ -67,12 +58,16 @@ function toggleExclude(ctx, i) {
   solveLive(ctx);
 }
 
-function ellipsoidNote(conf, radii) {
+/** What the drawn ellipsoid is: `ell` as Drawer.ellipsoid returns it (true semi-axes, the
+ *  exaggeration it is drawn with, its quality). */
+function ellipsoidNote(conf, ell) {
   const what = conf === "95"
     ? "95 % confidence ellipsoid (3-D: 2.7955 σ on each principal axis)"
     : "1σ ellipsoid (holds only 19.9 % of the probability in 3-D; 95 % is 2.7955× larger)";
-  if (!radii || !radii.every(Number.isFinite)) return `Drawn: ${what}.`;
-  return `Drawn at true size: ${what}; semi-axes ${radii.map((r) => mm(r)).join(" × ")} mm.`;
+  if (!ell || !ell.radii.every(Number.isFinite)) return `Drawn: ${what}.`;
+  const how = ell.scale === 1 ? "Drawn at true size" : `Drawn ×${ell.scale} (enlarged to be seen; 'true size' draws it in metres)`;
+  return `${how}: ${what}; semi-axes ${ell.radii.map((r) => mm(r)).join(" × ")} mm`
+    + `; 95 % radius ${mm(ell.r95)} mm: ${ell.quality} (tolerance 20 / 50 mm).`;
 }
 
 function solutionText(res) {
@@ -111,7 +106,9 @@ function render(ctx, busy = false) {
   } else if (res) {
     live.textContent = solutionText(res);
     if (res.warnings && res.warnings.length) {
-      live.append(h("div", { class: "warn" }, ...res.warnings.map((w) => h("div", {}, `⚠ ${w}`))));
+      // the project's own warnings (shared by every stored point) are shown once, by the points list
+      const own = res.warnings.filter((w) => !(ctx.state.projectWarnings || []).includes(w));
+      if (own.length) live.append(h("div", { class: "warn" }, ...own.map((w) => h("div", {}, `⚠ ${w}`))));
     }
   } else {
     live.textContent = busy ? "solving…" : (m.rays.length < 2 ? `Needs at least 2 rays (${m.rays.length} so far).` : "");
@@ -138,7 +135,7 @@ function draw(ctx) {
     const bs = state.tileset.boundingSphere;
     return norm(sub([bs.center.x, bs.center.y, bs.center.z], origin)) + bs.radius;
   };
-  let radii = null;
+  let ell = null;
   drawer.batch(() => {
     m.rays.forEach((ray, i) => {
       const rr = res && res.rays ? res.rays[i] : null;
@@ -147,7 +144,7 @@ function draw(ctx) {
       drawer.ray("current", ray.origin, ray.direction, len, color, `${i + 1}`);
     });
     if (res) {
-      radii = drawer.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, ctx.confScale(), COLORS.solution);
+      ell = drawer.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, ctx.confScale());
       drawer.add("current", {
         position: cart(pRendered),
         point: { pixelSize: 14, color: Cesium.Color.TRANSPARENT, outlineColor: COLORS.solution, outlineWidth: 2,
@@ -155,13 +152,14 @@ function draw(ctx) {
       });
     }
   });
-  $("#ellipsoid-note").textContent = res ? ellipsoidNote(state.conf, radii) : "";
+  $("#ellipsoid-note").textContent = res ? ellipsoidNote(state.conf, ell) : "";
   // the epipolar guide (guide.js) needs each ray's depth; it draws itself after the render
   for (const ray of m.rays) requestDepth(ctx, ray);
   refreshGuide(ctx.viewer);
 }
 
 function end(ctx) {
+  closeIdPrompt();
   ctx.state.measure = null;
   $("#measure-panel").hidden = true;
   ctx.draw.clear("current");
@@ -176,11 +174,6 @@ const measure = {
   primary: true,
   hidesSelection: true, // the selected point's rays and ellipsoid would mix with the new ones
 
-  setup() {
-    // the server picks the next free id unless the user types one
-    $("#pt-id").addEventListener("input", () => { $("#pt-id").dataset.auto = "0"; });
-  },
-
   /** Start a new point, or reopen the stored point `editPoint` to add rays to it. */
   start(ctx, editPoint = null) {
     const { state } = ctx;
@@ -192,9 +185,6 @@ const measure = {
       pointId: editPoint ? editPoint.id : nextPointId(state.points),
       solution: null, error: null, seq: 0,
     };
-    $("#pt-id").value = state.measure.pointId;
-    $("#pt-id").dataset.auto = "1";
-    $("#pt-id").disabled = Boolean(editPoint);
     $("#pt-code").value = editPoint ? editPoint.code : "";
     $("#pt-desc").value = editPoint ? editPoint.description : "";
     $("#measure-panel").hidden = false;
@@ -246,12 +236,19 @@ const measure = {
     ctx.updateStatus();
   },
 
-  /** Enter: store the point (POST a new one, PATCH a reopened one). */
+  /** Enter: a new point's id is asked first (the ID prompt), Enter again stores it (POST); a
+   *  reopened point is stored at once (PATCH). */
   async finish(ctx) {
     const { state } = ctx;
     const m = state.measure;
     if (!state.project) { ctx.message("Create or open a project first (top bar), then press Enter again.", true); return; }
     if (m.rays.length < 2) { ctx.message(`A point needs at least 2 rays; ${m.pointId} has ${m.rays.length}.`, true); return; }
+    if (!m.editing && !idPromptOpen()) { openIdPrompt(ctx); return; }
+    const typedId = m.editing ? "" : promptedId();
+    if (typedId && state.points.some((p) => p.id === typedId)) {
+      idError(`${typedId} is taken by a stored point: type another id (Esc goes back to measuring).`);
+      return;
+    }
     const code = $("#pt-code").value.trim();
     const description = $("#pt-desc").value.trim();
     const pid = encodeURIComponent(state.project.id);
@@ -262,9 +259,8 @@ const measure = {
         const url = `/projects/${pid}/points/${encodeURIComponent(m.editing)}`;
         pt = await api("PATCH", url, { rays: m.rays, excluded, code, description });
       } else {
-        const id = ($("#pt-id").dataset.auto !== "1" && $("#pt-id").value.trim()) || undefined;
         pt = await api("POST", `/projects/${pid}/points`, {
-          id, code, description, rays: m.rays, excluded, georef_version: m.georefVersion ?? ctx.georefVersion(),
+          id: typedId || undefined, code, description, rays: m.rays, excluded, georef_version: m.georefVersion ?? ctx.georefVersion(),
         });
       }
       end(ctx);
@@ -275,12 +271,14 @@ const measure = {
         ? `Stored ${pt.id}: ${r.crs ? `E ${fixed(r.easting)} N ${fixed(r.northing)} H ${fixed(r.height)}` : `lon ${fixed(r.lon, 8)} lat ${fixed(r.lat, 8)} h ${fixed(r.h_wgs84)}`}`
         : `Stored ${pt.id}, but it could not be solved: ${pt.error}`, pt.status !== "solved");
     } catch (exc) {
-      ctx.fail(exc);
+      if (exc.status === 409 && !m.editing) idError(exc.message); else ctx.fail(exc);
     }
   },
 
-  /** Escape (`event` is the key) or the panel's Cancel button: drop the point. */
+  /** Escape (`event` is the key) or the panel's Cancel button: drop the point; Escape in
+   *  the ID prompt only closes the prompt (back to measuring). */
   cancel(ctx, event) {
+    if (event && idPromptOpen()) { closeIdPrompt(); ctx.updateStatus(); return; }
     end(ctx);
     if (event) ctx.message("Point cancelled.");
   },
@@ -289,10 +287,11 @@ const measure = {
     const m = ctx.state.measure;
     const n = m.rays.length;
     const name = m.editing ? `point ${m.editing}` : m.pointId;
+    if (idPromptOpen()) return { text: `${n} rays: type the point's ID and press Enter to store it; Esc goes back to measuring.`, className: "measuring" };
     let text;
     if (n === 0) text = `Measuring ${name}: click the feature to add ray 1. Esc cancels.`;
     else if (n === 1) text = `Ray 1 of ${name} added. Move the camera to another viewpoint (30° or more away; V flies to a suggested one) and click the same feature for ray 2. Backspace removes ray 1, Esc cancels.`;
-    else text = `${n} rays on ${name}. Click the feature from another viewpoint for ray ${n + 1}, or press Enter to store it. Backspace removes ray ${n}, Esc cancels.`;
+    else text = `${n} rays on ${name}. Click the feature from another viewpoint for ray ${n + 1}, or press Enter to name and store it. Backspace removes ray ${n}, Esc cancels.`;
     const sky = noHitRays(m);
     if (sky.length) text = `${noHitText(m, sky[0])}. ${n} rays on ${name}; Esc cancels.`;
     const auto = autoAimResult(m);

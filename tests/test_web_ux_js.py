@@ -1,0 +1,86 @@
+"""The viewer's measuring-experience helpers in Node.js: the id offered for a new point
+(web/js/pointid.js), the error ellipsoid's exaggeration and quality colour (web/js/quality.js),
+and the height system and project warnings as the panels show them (web/js/format.js)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import pytest
+
+from tests.conftest import REPO
+
+WEB_JS = REPO / "web" / "js"
+pytestmark = pytest.mark.skipif(shutil.which("node") is None, reason="Node.js is not installed")
+
+
+def run_js(body: str, data) -> object:
+    """Run `body` with pointid.js as I, quality.js as Q, format.js as F and `data` bound; it
+    prints one JSON value."""
+    src = (f"import * as I from '{(WEB_JS / 'pointid.js').as_uri()}';\n"
+           f"import * as Q from '{(WEB_JS / 'quality.js').as_uri()}';\n"
+           f"import * as F from '{(WEB_JS / 'format.js').as_uri()}';\n"
+           f"const data = {json.dumps(data)};\n{body}\n")
+    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+SOLUTION = {"crs": "EPSG:27700", "easting": 545386.012, "northing": 258102.004, "height": 63.5,
+            "lon": 0.1234, "lat": 52.2, "h_wgs84": 63.5}
+CHECKS = [
+    {"id": "B1", "x": 545386.0, "y": 258102.0, "z": 63.509, "crs": "EPSG:27700"},  # 1.5 cm away
+    {"id": "B2", "x": 545386.3, "y": 258102.0, "z": 63.5, "crs": "EPSG:27700"},    # 29 cm away
+    {"id": "G1", "x": 545380.0, "y": 258095.0, "z": 52.0, "crs": "EPSG:27700"},    # 15 m away
+]
+
+
+def test_offered_id_is_the_nearest_unmeasured_check_point():
+    got = run_js("""console.log(JSON.stringify([
+      I.suggestPointId(data.sol, data.checks, []),
+      I.suggestPointId(data.sol, data.checks, [{ id: "B1" }]),
+      I.suggestPointId(data.sol, data.checks, [{ id: "B1" }, { id: "B2" }, { id: "P4" }]),
+      I.suggestPointId(null, data.checks, [{ id: "P1" }]),
+      I.suggestPointId(data.sol, [], [{ id: "P2" }, { id: "P3" }]),
+      I.suggestPointId({ ...data.sol, crs: null, easting: null, lon: 0.1234, lat: 52.2 },
+        [{ id: "W1", x: 0.12341, y: 52.2, z: 63.5, crs: "EPSG:4979" }], []),
+    ]));""", {"sol": SOLUTION, "checks": CHECKS})
+    # the measured B1 is not offered again; G1 is too far (beyond 1 m) to be this point
+    assert got == ["B1", "B2", "P5", "P2", "P4", "W1"]
+
+
+def test_exaggeration_makes_the_ellipsoid_visible_in_1_2_5_steps():
+    got = run_js("""console.log(JSON.stringify(data.map(([r, d]) =>
+      Q.exaggeration(r, d, Math.PI / 3, 720))));""",
+                 [[0.02, 10.0], [0.02, 40.0], [0.5, 10.0], [0.001, 100.0], [0.0001, 100.0], [0.0, 10.0]])
+    # 2 cm at 10 m: 0.02 * 720 / (2 * 10 * tan 30 deg) = 1.25 px -> x20 (25 px, >= 24)
+    assert got == [20, 100, 1, 5000, 10000, 1]  # capped at 10000
+
+
+def test_quality_against_the_default_tolerance():
+    got = run_js("console.log(JSON.stringify([0.015, 0.02, 0.021, 0.05, 0.2, NaN]"
+                 ".map((r) => Q.quality(r))));", None)
+    assert got == ["good", "good", "fair", "fair", "poor", None]
+
+
+def test_height_system_is_said_once():
+    got = run_js("""console.log(JSON.stringify([
+      F.heightsText("ellipsoidal", "ellipsoidal height on WGS 84 (EPSG:4979)"),
+      F.heightsText("orthometric", "ODN height (EPSG:5701)"),
+      F.heightsText("ellipsoidal", null)]));""", None)
+    assert got == ["ellipsoidal height on WGS 84 (EPSG:4979)",
+                   "ODN height (EPSG:5701) (orthometric height)", "ellipsoidal height"]
+
+
+def test_warnings_every_point_shares_are_the_projects():
+    datum = "EPSG:4978 -> EPSG:27700 goes through ..., accurate to 2 m only"
+    pts = [{"status": "solved", "result": {"warnings": [datum]}},
+           {"status": "solved", "result": {"warnings": [datum, "ray(s) 2 excluded by request"]}},
+           {"status": "failed", "result": None}]
+    got = run_js("console.log(JSON.stringify([F.sharedWarnings(data), "
+                 "F.sharedWarnings(data.slice(1))]));", pts)
+    # one point alone: its warnings stay its own
+    assert got == [[datum], []]
