@@ -140,6 +140,30 @@ def test_the_surface_normal_makes_a_wide_baseline_on_the_ground_match(noise):
         assert odd.ok == without.ok
 
 
+def test_a_match_that_does_not_lead_back_to_the_click_is_declined(noise):
+    """The click's patch is copied 30 px along the line the target's ray draws in the
+    reference view: the forward match is unique, matching back finds two places."""
+    tgt = camera(oblique(40.0), [0.4, -0.3, 0.0])
+    ref_img, tgt_img = render(REF, noise), render(tgt, noise)
+    click = CLICKS[0]
+    px, t = truth(REF, tgt, click)
+    ok = _match(ref_img, tgt_img, tgt, click, near_pad=1.5, far_pad=1.5)
+    assert ok.ok, ok.reason
+    d_t = tgt.pick_ray(px)[0]
+    hit = REF.position + t * REF.pick_ray(click)[0]
+    along = np.linalg.norm(hit - tgt.position)
+    ends, _ = REF.project(tgt.position + np.outer([along - 1.0, along + 1.0], d_t))
+    step = (ends[1] - ends[0]) / np.linalg.norm(ends[1] - ends[0])
+    x, y = np.round(click - 0.5).astype(int)
+    dx, dy = np.round(30 * step).astype(int)
+    twin = ref_img.copy()
+    twin[y - 14 + dy:y + 15 + dy, x - 14 + dx:x + 15 + dx] = ref_img[y - 14:y + 15, x - 14:x + 15]
+    res = _match(twin, tgt_img, tgt, click, near_pad=1.5, far_pad=1.5)
+    assert not res.ok
+    assert res.reason.startswith("inconsistent"), res.reason
+    assert res.score > 0.8          # the forward match itself was good
+
+
 def test_cropped_images_are_placed_by_their_origin(noise):
     tgt = camera(oblique(40.0), [0.4, -0.3, 0.0])
     ref_img, tgt_img = render(REF, noise), render(tgt, noise)

@@ -30,7 +30,8 @@ segment (OpenCV).
 A match is declined (``ok`` False, ``reason`` says why) when the patch has no texture or the
 peak is weak, when another peak away from the main one is nearly as high (ambiguous) or
 several are (repeated texture along the line), when the segment is not in the target view
-or the patch leaves the reference image, or when the refined peak falls off the segment.
+or the patch leaves the reference image, when the refined peak falls off the segment, or
+when matching back from the target view does not lead to the click (inconsistent).
 """
 
 from __future__ import annotations
@@ -68,6 +69,8 @@ MAX_TEMPLATES = 16
 #: plane orientations closer than this (cosine) count as one.
 EDGE_ON = 0.2
 SAME_PLANE = 0.985
+#: Matching back from the target view must land this close to the click (px).
+BACK_MATCH_PX = 1.0
 #: Iterations and step (px) at which the sub-pixel alignment stops.
 ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4)
 
@@ -93,6 +96,7 @@ class MatchResult:
     second: float | None = None
     depth_m: float | None = None
     reason: str | None = None
+    plane: FloatArray | None = None     # the normal of the plane whose warp matched best
 
     def to_json(self) -> dict[str, object]:
         return {"ok": self.ok, "pixel": None if self.pixel is None else self.pixel.tolist(),
@@ -292,7 +296,36 @@ def plane_normals(ref: Camera, tgt: Camera, point: FloatArray, normal: FloatArra
 
 def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: float,
                   depth: float, normal: FloatArray | None = None) -> MatchResult:
-    """The click of the reference view found in the target view (module docstring).
+    """The click of the reference view found in the target view (module docstring), and
+    confirmed by matching back: the patch around the match, searched for in the reference
+    view along the target ray's segment over the same stretch of space, must lead back to
+    within BACK_MATCH_PX of the click (a wrong match on repetitive or confusing structure
+    seldom does); otherwise declined as inconsistent.
+
+    ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
+    reference ray (near <= depth <= far); ``normal``: the surface's normal there (rendered
+    ECEF, any length; either sign) when known."""
+    there = match_one_way(ref, click, tgt, near, far, depth, normal)
+    if not there.ok or there.pixel is None or there.depth_m is None:
+        return there
+    o, d = ref.camera.position, ref.camera.pick_ray(click)[0]
+    c = tgt.camera.position
+    ends = [float(np.linalg.norm(o + t * d - c)) for t in (near, far, there.depth_m)]
+    back = match_one_way(tgt, there.pixel, ref, min(ends[:2]), max(ends[:2]), ends[2],
+                         there.plane)
+    if not back.ok or back.pixel is None:
+        return declined(f"inconsistent: matching back from the target view fails "
+                        f"({back.reason})", there.score, there.second)
+    miss = float(np.linalg.norm(back.pixel - click))
+    if miss > BACK_MATCH_PX:
+        return declined(f"inconsistent: matching back lands {miss:.1f} px from the click",
+                        there.score, there.second)
+    return there
+
+
+def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: float,
+                  depth: float, normal: FloatArray | None = None) -> MatchResult:
+    """The click of the reference view found in the target view, one way (module docstring).
 
     ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
     reference ray (near <= depth <= far); ``normal``: the surface's normal there (rendered
@@ -387,4 +420,4 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     if not (math.isfinite(t) and near - slack <= t <= far + slack) or abs(w) > b:
         return declined("off the segment: the best match does not lie on the segment where "
                         "the feature can be", peak, second)
-    return MatchResult(True, pixel, peak, second, float(t), None)
+    return MatchResult(True, pixel, peak, second, float(t), None, normal_used)
