@@ -312,7 +312,7 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     c = tgt.camera.position
     ends = [float(np.linalg.norm(o + t * d - c)) for t in (near, far, there.depth_m)]
     back = match_one_way(tgt, there.pixel, ref, min(ends[:2]), max(ends[:2]), ends[2],
-                         there.plane)
+                         there.plane, only_normal=True)
     if not back.ok or back.pixel is None:
         return declined(f"inconsistent: matching back from the target view fails "
                         f"({back.reason})", there.score, there.second)
@@ -324,8 +324,11 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
 
 
 def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: float,
-                  depth: float, normal: FloatArray | None = None) -> MatchResult:
-    """The click of the reference view found in the target view, one way (module docstring).
+                  depth: float, normal: FloatArray | None = None, only_normal: bool = False
+                  ) -> MatchResult:
+    """The click of the reference view found in the target view, one way (module docstring);
+    with ``only_normal`` the patch is warped by the plane of ``normal`` alone (matching
+    back, on the plane the way there found).
 
     ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
     reference ray (near <= depth <= far); ``normal``: the surface's normal there (rendered
@@ -374,8 +377,11 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     # orientation whose warp matches best is kept
     strip_from_target = np.linalg.inv(a)
     depths = depth_samples(near, far, depth)
+    planes = plane_normals(ref.camera, tgt.camera, o + depth * d, normal)
+    if only_normal and normal is not None:
+        planes = planes[:1]
     tried = [(n, sweep(ref, tgt, strip, strip_from_target, o, d, n, click, depths))
-             for n in plane_normals(ref.camera, tgt.camera, o + depth * d, normal)]
+             for n in planes]
     found = [(n, sw) for n, sw in tried if isinstance(sw, Sweep)]
     if not found:
         return declined(next(sw for _, sw in tried if isinstance(sw, str)))
