@@ -6,9 +6,11 @@ segment (OpenCV).
    target camera and to the target image (less the template's reach).
 2. The patch around the click is warped into the target view by the homography of a plane
    through the depth-hint point. Which plane: the surface's own when the depth hint gives
-   its normal (the flat splats there); else, and in any case as alternatives, the plane
-   parallel to the reference image (normal = its viewing direction, as plane-sweep stereo
-   assumes: exact for a surface seen square-on, which is what an operator picks a view for)
+   its normal (the flat splats there); else, and in any case as alternatives, the level
+   plane (normal = the local up: ground, roofs, the tops of things, whose splats' normal a
+   client may not pass), the plane parallel to the reference image (normal = its viewing
+   direction, as plane-sweep stereo assumes: exact for a surface seen square-on, which is
+   what an operator picks a view for)
    and the plane facing both cameras alike (normal along the bisector of the two lines of
    sight: the least distortion for a wide baseline whose surface is unknown, where the
    first one is seen nearly edge-on by the target). Each is tried and the one whose warp
@@ -43,6 +45,7 @@ import cv2
 import numpy as np
 
 from gsgeo.aim.camera import Camera, closest_on_first
+from gsgeo.aim.views import local_axes
 from gsgeo.solve.linalg import FloatArray
 
 #: Half size of the matched patch (the template is 2 HALF_PX + 1 pixels square).
@@ -274,7 +277,8 @@ def sweep(ref: View, tgt: View, strip: np.ndarray, strip_from_target: np.ndarray
 def plane_normals(ref: Camera, tgt: Camera, point: FloatArray, normal: FloatArray | None
                   ) -> list[FloatArray]:
     """The plane orientations tried: the surface normal when known (and not seen edge-on by
-    either camera), the plane parallel to the reference image, and the plane facing both
+    either camera), the level plane (the local up at ``point``, unless seen edge-on), the
+    plane parallel to the reference image, and the plane facing both
     cameras alike (normal along the bisector of the two lines of sight, the least distortion
     for a wide baseline whose surface is unknown); near-duplicates dropped."""
     to_ref = ref.position - point
@@ -288,7 +292,10 @@ def plane_normals(ref: Camera, tgt: Camera, point: FloatArray, normal: FloatArra
         if n @ to_ref > EDGE_ON and n @ to_tgt > EDGE_ON:
             out.append(n)
     bisector = to_ref + to_tgt
-    for n in (-ref.direction, bisector / max(float(np.linalg.norm(bisector)), 1e-12)):
+    level = local_axes(point)[2]
+    for n in (level, -ref.direction, bisector / max(float(np.linalg.norm(bisector)), 1e-12)):
+        if n is level and not (n @ to_ref > EDGE_ON and n @ to_tgt > EDGE_ON):
+            continue
         if all(float(n @ m) < SAME_PLANE for m in out):
             out.append(np.asarray(n, dtype=np.float64))
     return out
