@@ -13,7 +13,9 @@ views are chosen greedily: each next one most reduces the trace of the covarianc
 rays and the views already chosen, at least MIN_SEPARATION_DEG from those. A candidate is
 occluded when the splats between its camera and the point (gsgeo.aim.depth's profile of its
 ray, up to a little before the point) add up to opacity 1/2; occluded candidates are chosen
-only when no unoccluded one is left.
+only when no unoccluded one is left. Where the first ray meets flat splats (a surface with a
+normal, gsgeo.aim.depth), views that see that surface at less than MIN_INCIDENCE_DEG come
+after all others: the feature is a sliver there, for image matching as for a click.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gsgeo.aim.camera import Camera
-from gsgeo.aim.depth import HIT_OPACITY, ray_profile
+from gsgeo.aim.depth import HIT_OPACITY, depth_hint, ray_profile
 from gsgeo.aim.splatindex import SplatIndex
 from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form, enu_rotation
 from gsgeo.crs.modelmatrix import apply_points, invert_affine
@@ -36,6 +38,9 @@ AZIMUTHS_DEG = np.arange(0.0, 360.0, 15.0)
 ELEVATIONS_DEG = np.array([10.0, 25.0, 40.0, 55.0, 70.0])
 #: Two chosen views are at least this far apart (angle between their rays, degrees).
 MIN_SEPARATION_DEG = 20.0
+#: Views whose line of sight meets the surface (where its splats are flat) at less than this
+#: angle are chosen only when no other is left.
+MIN_INCIDENCE_DEG = 20.0
 #: The stretch of a candidate's ray before the point not tested for occlusion: the point's
 #: own surface (a share of the range, and at least this many metres).
 POINT_CLEARANCE = 0.02
@@ -121,6 +126,11 @@ def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: Flo
     alone = predicted_traces(o, d, f, cams, -back, f_new, sigma_px)
     angles = np.degrees(np.arccos(np.clip(-back @ d.T, -1.0, 1.0))).min(axis=1)
     occlusion = Occlusion(index, p, model_matrix, f_new)
+    # a view that sees the surface at grazing incidence (or from behind) comes last: its
+    # image of the feature is a sliver, for the matcher as for the operator's click
+    normal = surface_at(index, o[0], d[0], f[0], model_matrix)
+    grazing = (np.zeros(len(cams), dtype=bool) if normal is None
+               else back @ normal < math.sin(math.radians(MIN_INCIDENCE_DEG)))
     chosen: list[int] = []
     chosen_occluded: list[bool] = []
     o_sel, d_sel, f_sel = o, d, f
@@ -129,7 +139,8 @@ def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: Flo
     tested = np.zeros(len(cams), dtype=bool)
     while len(chosen) < k and remaining.any():
         tr = predicted_traces(o_sel, d_sel, f_sel, cams, -back, f_new, sigma_px)
-        order = [i for i in np.argsort(tr, kind="stable").tolist() if remaining[i]]
+        ranked = np.lexsort((tr, grazing))
+        order = [i for i in ranked.tolist() if remaining[i]]
         pick = first_visible(order, hidden, tested, occlusion, cams)
         pick = order[0] if pick is None else pick      # all occluded: the best of them
         chosen.append(pick)
@@ -147,6 +158,19 @@ def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: Flo
                                  float(np.degrees(el[i])), float(angles[i]),
                                  float(math.sqrt(alone[i])), occluded))
     return out
+
+
+def surface_at(index: SplatIndex | None, origin: FloatArray, direction: FloatArray,
+               ifov: float, model_matrix: FloatArray | None) -> FloatArray | None:
+    """The unit normal of the flat splats the first ray meets, facing its origin (rendered
+    ECEF); None without an index, where it hits nothing or the splats are not flat."""
+    if index is None:
+        return None
+    hint = depth_hint(index, origin, direction, ifov, model_matrix)
+    if not hint.hit or hint.normal is None:
+        return None
+    n = np.asarray(hint.normal, dtype=np.float64)
+    return n / np.linalg.norm(n)
 
 
 def first_visible(order: list[int], hidden: np.ndarray, tested: np.ndarray,
