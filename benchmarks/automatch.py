@@ -15,7 +15,9 @@ evaluate: gsgeo.aim.match.match_feature on every (reference, target) pair, as th
 would run it (with /depth's normal_ecef when --normal); per pair whether it was accepted, the
 matched pixel's distance from the truth's exact projection in the target (px) and the
 distance of the matched ray from the truth (cm); then the percentiles of the accepted
-errors, the declines by reason, and the markers with >= 2 views within 3 cm.
+errors, the declines by reason, the markers with >= 2 views within 3 cm, and the 3-D error of
+each point the click's ray and the accepted matches' rays make when there are >= 3 of them
+(gsgeo.solve's least squares, as the viewer stores it).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ sys.path.insert(0, str(REPO))
 from gsgeo.aim.camera import Camera  # noqa: E402
 from gsgeo.aim.images import decode_image  # noqa: E402
 from gsgeo.aim.match import View, match_feature  # noqa: E402
+from gsgeo.solve import intersect  # noqa: E402
 
 ELEVATION, RANGE, OFFSET = 45.0, 12.0, [0.4, -0.3, 0.0]
 VIEWPORT = {"width": 1280, "height": 720}
@@ -121,6 +124,8 @@ def view(v: dict, field: str) -> View:
 
 def evaluate(dataset: Path, use_normal: bool, verbose: bool) -> dict:
     rows = []
+    rays: dict[str, list] = {}
+    truths: dict[str, np.ndarray] = {}
     for path in sorted(dataset.glob("*.json")):
         rec = json.loads(path.read_text())
         truth = np.asarray(rec["truth_rendered_ecef"])
@@ -136,7 +141,14 @@ def evaluate(dataset: Path, use_normal: bool, verbose: bool) -> dict:
             ms = (time.perf_counter() - t0) * 1e3
             row = {"marker": rec["id"], "view": k + 1, "ok": res.ok, "score": res.score,
                    "reason": res.reason, "ms": ms}
+            if k == 0:
+                rays[rec["id"]] = [(ref.camera.position, ref.camera.pick_ray(click[None])[0],
+                                    ref.camera.ifov)]
+                truths[rec["id"]] = truth
             if res.ok and res.pixel is not None:
+                rays[rec["id"]].append((tgt.camera.position,
+                                        tgt.camera.pick_ray(res.pixel[None])[0],
+                                        tgt.camera.ifov))
                 xy, _ = tgt.camera.project(truth[None])
                 ray = tgt.camera.pick_ray(res.pixel[None])[0]
                 w = truth - tgt.camera.position
@@ -154,7 +166,18 @@ def evaluate(dataset: Path, use_normal: bool, verbose: bool) -> dict:
     markers = sorted({r["marker"] for r in rows})
     good = {m: sum(1 for r in acc if r["marker"] == m and r["cm"] <= WITHIN_CM) for m in markers}
     bad = {m: sum(1 for r in acc if r["marker"] == m and r["cm"] > WITHIN_CM) for m in markers}
+    # the point of the click's ray and the accepted matches' rays (>= 3 rays), as stored
+    point_cm = {}
+    for m, rs in rays.items():
+        if len(rs) >= 3:
+            res = intersect(np.array([r[0] for r in rs]), np.array([r[1] for r in rs]),
+                            ifov=np.array([r[2] for r in rs]))
+            point_cm[m] = float(np.linalg.norm(res.point - truths[m])) * 100
     summary = {
+        "points_3_rays": len(point_cm),
+        "points_within_3cm": sum(1 for v in point_cm.values() if v <= WITHIN_CM),
+        "points_over_10cm": sum(1 for v in point_cm.values() if v > 10.0),
+        "point_error_cm": {m: round(v, 2) for m, v in sorted(point_cm.items())},
         "pairs": len(rows), "accepted": len(acc),
         "accepted_within_3cm": sum(1 for r in acc if r["cm"] <= WITHIN_CM),
         "error_cm_p50_p90_max": [float(np.percentile(cm, 50)), float(np.percentile(cm, 90)),

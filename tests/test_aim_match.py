@@ -285,3 +285,26 @@ def test_match_answers_whatever_the_geometry(noise):
             assert near - 0.05 * span - 1e-6 <= res.depth_m <= far + 0.05 * span + 1e-6
 
     check()
+
+
+def test_views_whose_rays_are_perpendicular_match_back(noise):
+    """The ground seen from opposite azimuths at 45 degrees elevation: the two rays through
+    the feature are perpendicular. Matching back searches the target ray over a segment as
+    long as the reference one (it was the span of the target camera's distances to the ends
+    of the reference segment: a few millimetres here, and every match was declined
+    'inconsistent ... off the segment')."""
+    def cam(az: float) -> Camera:
+        a, e = np.radians(az), np.radians(45.0)
+        at = [9 * np.cos(e) * np.sin(a), 9 * np.cos(e) * np.cos(a), 9 * np.sin(e)]
+        return Camera.look_at(to_ecef(at), to_ecef([0, 0, 0]), UP, FOVY, W, H)
+
+    ref, tgt = cam(10.0), cam(190.0)
+    ref_img, tgt_img = render(ref, noise), render(tgt, noise)
+    click = np.array([640.0, 360.0])
+    px, t = truth(ref, tgt, click)
+    d = ref.pick_ray(click)[0]
+    assert abs(d @ tgt.pick_ray(px)[0]) < 0.01                 # perpendicular rays
+    res = match_feature(View(ref_img, np.zeros(2), ref), click, View(tgt_img, np.zeros(2), tgt),
+                        t - 0.3, t + 0.3, t + 0.05, normal=UP)
+    assert res.ok, res.reason
+    assert np.linalg.norm(res.pixel - px) < 0.2

@@ -317,9 +317,16 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
         return there
     o, d = ref.camera.position, ref.camera.pick_ray(click)[0]
     c = tgt.camera.position
-    ends = [float(np.linalg.norm(o + t * d - c)) for t in (near, far, there.depth_m)]
-    back = match_one_way(tgt, there.pixel, ref, min(ends[:2]), max(ends[:2]), ends[2],
-                         there.plane, only_normal=True)
+    d_back = tgt.camera.pick_ray(there.pixel)[0]
+    t_back = closest_on_first(c, d_back, o, d)
+    if not (math.isfinite(t_back) and t_back > 0):
+        t_back = float(np.linalg.norm(o + there.depth_m * d - c))
+    # the target ray's segment as long each side of the match as the reference one is (the
+    # distances from the target camera to the ends of the reference segment would collapse
+    # to a few millimetres when the two rays are perpendicular, and matching back declined)
+    back = match_one_way(tgt, there.pixel, ref,
+                         max(t_back - (there.depth_m - near), 1e-3),
+                         t_back + (far - there.depth_m), t_back, there.plane, only_normal=True)
     if not back.ok or back.pixel is None:
         return declined(f"inconsistent: matching back from the target view fails "
                         f"({back.reason})", there.score, there.second)
