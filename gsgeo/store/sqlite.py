@@ -199,11 +199,24 @@ class SQLiteTransaction(Transaction):
                            measured_by=row["measured_by"])
 
     def list_points(self, pid: str, results: bool = True) -> list[PointRecord]:
-        cols = "*" if results else ("project_id, id, seq, code, description, rays, excluded, "
-                                    "NULL AS result, error, solved_rev, created_at, updated_at, "
-                                    "frame, version, measured_by")
-        rows = self._all(f"SELECT {cols} FROM points WHERE project_id = ? ORDER BY seq", (pid,))
-        return [self._point(r) for r in rows]
+        # plain tuples in a fixed column order: a re-measure lists every point of a project,
+        # and sqlite3.Row's lookups by name were a good part of that
+        cur = self.con.cursor()
+        cur.row_factory = None
+        rows = cur.execute(
+            "SELECT project_id, id, seq, code, description, rays, excluded, "
+            f"{'result' if results else 'NULL'}, error, solved_rev, created_at, updated_at, "
+            "frame, version, measured_by FROM points WHERE project_id = ? ORDER BY seq",
+            (pid,)).fetchall()
+        frames: dict[str, JSON] = {}  # the points of a scene share few frames: each parsed once
+        loads = orjson.loads
+        return [PointRecord(project_id=p, id=i, seq=q, code=c, description=d, rays=loads(r),
+                            excluded=loads(x), result=None if res is None else loads(res),
+                            error=e, solved_rev=sr, created_at=ca, updated_at=ua,
+                            frame=None if f is None else (frames[f] if f in frames else
+                                                          frames.setdefault(f, loads(f))),
+                            version=v, measured_by=mb)
+                for (p, i, q, c, d, r, x, res, e, sr, ca, ua, f, v, mb) in rows]
 
     def count_point_records(self, pid: str, where: PointFilter | None = None) -> int:
         sql, args = _point_where(pid, where)
