@@ -118,7 +118,8 @@ def stored_rays_many(stored: Sequence[list[JSONObject]],
             if given is not None:
                 if not isinstance(given, list):
                     raise TypeError("not a matrix")
-                mats.setdefault(tuple(float(v) for v in given), []).append(i)
+                # grouped as given (1 and 1.0 hash alike); matrix4 checks the numbers
+                mats.setdefault(tuple(given), []).append(i)
         for key, rows in mats.items():
             m = matrix4(key)
             if not is_similarity(m):
