@@ -1,0 +1,177 @@
+"""Auto-aim in the viewer (key A), end to end in headless Chromium (SwiftShader) on the demo scene:
+the time from A to the auto rays and where it goes, and the operator's clicks per point with
+the 3-D error of each method (the accuracy experiment's "auto" row).
+
+    python benchmarks/autoaim.py [--data DIR] [--markers G1,B1,...] [--manual] [--out FILE]
+
+For each marker (default all 20 of gsgeo.demo.place.truth_points()): M, one real mouse click on
+the marker from one view (45 degrees up, 12 m, from outside the building), A; the page's
+window.gsgeo.autoaim.last gives the instants (ms from A) of the depth answer, the reference
+crop, the suggested views, each view drawn and matched, and the rays added. With >= 2 auto
+rays the point is stored (Enter, its id); its 3-D error against the truth is recorded.
+--manual also measures each marker by hand: three clicks from three views (the workplace
+tests' procedure), then Enter. The figures are printed and, with --out, written as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from gsgeo.demo import place, scene  # noqa: E402
+from gsgeo.demo.project import PROJECT_ID  # noqa: E402
+from tests.e2e.workplace import AIM_JS, CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from tests.servertools import start_server  # noqa: E402
+
+VIEWPORT = {"width": 1280, "height": 720}
+ELEVATION, RANGE, OFFSET = 45.0, 12.0, [0.4, -0.3, 0.0]
+
+
+def outward(local) -> float:
+    cx, cy = np.mean(scene.BUILDING_X), np.mean(scene.BUILDING_Y)
+    return float(np.degrees(np.arctan2(local[0] - cx, local[1] - cy)))
+
+
+def click(page, t, az: float, el: float, rng: float, off) -> None:
+    a = page.evaluate(AIM_JS, [list(t.ecef), az, el, rng, off])
+    page.mouse.click(a["x"], a["y"])
+
+
+def store(page, t) -> dict:
+    page.wait_for_function("gsgeo.state.measure.solution !== null || gsgeo.state.measure.error !== null",
+                           timeout=120_000)
+    page.keyboard.press("Enter")
+    page.wait_for_selector("#id-prompt:not([hidden])")
+    page.fill("#id-prompt-input", t.id)
+    with page.expect_response(lambda r: r.url.endswith("/points") and r.request.method == "POST") as resp:
+        page.keyboard.press("Enter")
+    page.wait_for_selector("#measure-panel", state="hidden")
+    return resp.value.json()
+
+
+def error_of(pt: dict, t) -> float:
+    return float(np.linalg.norm(np.asarray(pt["result"]["point_ecef"]) - np.asarray(t.ecef)))
+
+
+def auto_point(page, t) -> dict:
+    page.keyboard.press("m")
+    page.wait_for_selector("#measure-panel:not([hidden])")
+    click(page, t, outward(t.local), ELEVATION, RANGE, OFFSET)
+    page.wait_for_function("gsgeo.state.measure.rays.length === 1")
+    t0 = time.perf_counter()
+    page.keyboard.press("a")
+    page.wait_for_function("gsgeo.state.measure.autoaim && !gsgeo.state.measure.autoaim.running",
+                           timeout=900_000, polling=100)
+    wall = time.perf_counter() - t0
+    last = page.evaluate("gsgeo.autoaim.last")
+    out = {"id": t.id, "wall_s": wall, "timings": last, "clicks": 1}
+    if last["added"] >= 2:
+        out["error_m"] = error_of(store(page, t), t)
+    else:
+        page.keyboard.press("Escape")
+        page.wait_for_selector("#measure-panel", state="hidden")
+    return out
+
+
+def manual_point(page, t) -> dict:
+    page.keyboard.press("m")
+    page.wait_for_selector("#measure-panel:not([hidden])")
+    az = outward(t.local)
+    views = [(az, ELEVATION, RANGE, OFFSET), (az - 50.0, 35.0, 12.0, [-0.4, 0.4, 0.0]),
+             (az + 50.0, 55.0, 10.0, [0.3, 0.5, -0.2])]
+    for i, v in enumerate(views):
+        click(page, t, *v)
+        page.wait_for_function(f"gsgeo.state.measure.rays.length === {i + 1}")
+    return {"id": t.id, "clicks": len(views), "error_m": error_of(store(page, t), t)}
+
+
+def rmse(xs: list[float]) -> float:
+    return float(np.sqrt(np.mean(np.square(xs)))) if xs else float("nan")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, help="DATA directory with the demo (made when missing)")
+    ap.add_argument("--markers", help="comma-separated marker ids (default: all 20)")
+    ap.add_argument("--manual", action="store_true", help="also measure each marker by three clicks")
+    ap.add_argument("--manual-only", action="store_true", help="only the three-click measurements")
+    ap.add_argument("--out", type=Path, help="write the results as JSON")
+    args = ap.parse_args()
+    from playwright.sync_api import sync_playwright
+
+    tmp = tempfile.TemporaryDirectory()
+    data = args.data or Path(tmp.name) / "data"
+    if not (data / "scenes" / "demo").is_dir():
+        subprocess.run([sys.executable, "-m", "gsgeo", "demo", "--data", str(data), "--no-serve"],
+                       cwd=REPO, check=True, capture_output=True)
+    truth = {t.id: t for t in place.truth_points()}
+    ids = args.markers.split(",") if args.markers else list(truth)
+    print(f"{platform.node()} {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; markers {','.join(ids)}")
+    proc, base = start_server(data)
+    auto: list[dict] = []
+    manual: list[dict] = []
+    try:
+        with sync_playwright() as pw:
+            b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+            page = b.new_page(viewport=VIEWPORT)
+            page.goto(f"{base}/?scene=demo&project={PROJECT_ID}")
+            page.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=120_000)
+            page.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
+                                   timeout=300_000)
+            for pid in [] if args.manual_only else ids:
+                r = auto_point(page, truth[pid])
+                tm = r["timings"]
+                views = " ".join(f"v{v['view']} drawn {v['drawn'] / 1000:.1f} s ({v['frames']} frames) "
+                                 f"matched {v.get('matched', 0) / 1000:.1f} s" for v in tm.get("views", []))
+                err = f"{1000 * r['error_m']:.1f} mm" if "error_m" in r else "not stored"
+                sec = {k: tm.get(k, float("nan")) / 1000 for k in ("rays", "depth", "reference", "suggested")}
+                print(f"{pid}: A -> rays {sec['rays']:.1f} s (wall {r['wall_s']:.1f} s); "
+                      f"depth {sec['depth']:.2f} s, reference {sec['reference']:.1f} s, "
+                      f"views {sec['suggested']:.1f} s; {views}; {tm['added']} auto rays; {err}", flush=True)
+                auto.append(r)
+            if args.manual or args.manual_only:
+                # the auto points hold the markers' ids: the manual ones go to a second project
+                import httpx
+
+                r = httpx.post(f"{base}/api/projects", json={"name": "manual", "id": "manual",
+                                                             "scene": "demo", "crs": place.CRS})
+                r.raise_for_status()
+                page.goto(f"{base}/?scene=demo&project=manual")
+                page.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=120_000)
+                for pid in ids:
+                    r = manual_point(page, truth[pid])
+                    print(f"{pid}: manual, {r['clicks']} clicks, {1000 * r['error_m']:.1f} mm", flush=True)
+                    manual.append(r)
+            b.close()
+    finally:
+        proc.terminate()
+        proc.communicate(timeout=10)
+    done = [r for r in auto if "error_m" in r]
+    to_rays = [r["timings"]["rays"] / 1000 for r in auto if "rays" in r["timings"]]
+    if auto:
+        median = f"A -> rays median {statistics.median(to_rays):.1f} s" if to_rays else "no rays added"
+        print(f"\nauto: {len(done)} of {len(auto)} stored; {median}")
+        print(f"auto: 1 click per point (+ A); RMSE 3-D {100 * rmse([r['error_m'] for r in done]):.2f} cm "
+              f"over {len(done)} points")
+    if manual:
+        print(f"manual: 3 clicks per point; RMSE 3-D {1000 * rmse([r['error_m'] for r in manual]):.2f} mm "
+              f"over {len(manual)} points")
+    if args.out:
+        args.out.write_text(json.dumps({"auto": auto, "manual": manual}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
