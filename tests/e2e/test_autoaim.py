@@ -40,8 +40,9 @@ ELEVATION, RANGE, OFFSET = 45.0, 12.0, [0.4, -0.3, 0.0]
 WITHIN_M, WRONG_M, MIN_FOUND = 0.03, 0.10, 15
 CHI2_3_95 = float(stats.chi2.ppf(0.95, 3))
 #: Why the test is expected to fail for now (the matcher is the server's, gsgeo.aim.match).
-MATCHER_SHORT = ("on 2026-11-25 the server's matcher (POST /api/match) found >= 2 of the 4 views for R1 "
-                 "only; the other markers' views were declined (weak, ambiguous): benchmarks/README.md")
+MATCHER_SHORT = ("the server's matcher (POST /api/match) finds >= 2 of the 4 views for too few markers: "
+                 "3 of 20 in this test's run of 2026-11-25 (R1, S1, S4), 7 of 20 offline with the "
+                 "matcher of 2bcc396 (benchmarks/README.md); 15 are needed")
 
 
 @pytest.fixture(scope="module")
