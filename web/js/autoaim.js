@@ -113,6 +113,24 @@ function setCamera(viewer, camera) {
     orientation: { direction: c3(camera.direction), up: c3(camera.up) } });
 }
 
+/** Hide the measuring graphics and the globe (they would cover the feature or cost a frame);
+ *  returns the function that shows them again. Nested calls leave them to the outer one, so
+ *  that nothing changes between the views of one auto-aim (a change would ask for a frame). */
+let hidden = 0;
+function hideExtras(ctx) {
+  const scene = ctx.viewer.scene;
+  if (hidden++ > 0) return () => { hidden--; };
+  const shown = ctx.draw.ds.show;
+  const globe = scene.globe.show;
+  ctx.draw.ds.show = false;
+  scene.globe.show = false;
+  return () => {
+    hidden--;
+    ctx.draw.ds.show = shown;
+    scene.globe.show = globe;
+  };
+}
+
 /** Render at `camera` until a frame shows the splats sorted and drawn for it, without the
  *  measuring graphics (rays, markers: they would sit on the feature) and the globe, and return
  *  the crops `boxes()` gives of that frame (canvases) and the number of frames it took. The
@@ -125,11 +143,8 @@ function setCamera(viewer, camera) {
 function captureAt(ctx, camera, boxes) {
   const { viewer } = ctx;
   const scene = viewer.scene;
-  const shown = ctx.draw.ds.show;
-  const globe = scene.globe.show;
   setCamera(viewer, camera);
-  ctx.draw.ds.show = false;
-  scene.globe.show = false;
+  const restore = hideExtras(ctx);
   const t = ctx.state.tileset;
   const p = t && t.gaussianSplatPrimitive;
   let muted = null;
@@ -145,8 +160,7 @@ function captureAt(ctx, camera, boxes) {
       scene.postRender.removeEventListener(onPost);
       clearTimeout(timer);
       if (muted) muted.command.instanceCount = muted.instanceCount;
-      ctx.draw.ds.show = shown;
-      scene.globe.show = globe;
+      restore();
       // no frame asked here: the next view's camera, or the return to the first view, asks
       // for one (a frame now would draw every splat again while the match is awaited)
       fn();
@@ -271,9 +285,19 @@ export async function autoAim(ctx, changed = () => {}) {
   const result = { running: true, added: 0, declined, text: "", timings };
   m.autoaim = result;
   running = result;
-  const say = (text) => { result.text = text; ctx.updateStatus(); changed(false); };
+  // progress goes to the status line and the panel only: a redraw of the measuring graphics
+  // would ask for frames, each drawing every splat again between the views
+  const say = (text) => {
+    result.text = text;
+    ctx.updateStatus();
+    const el = autoAimPanel(m);
+    const old = document.getElementById("autoaim-report");
+    if (old) old.replaceWith(el);
+    else if (document.getElementById("live-solution")) document.getElementById("live-solution").append(el);
+  };
   const home = currentCamera(viewer);
   let moved = false;
+  let restore = null;
   try {
     say("Auto-aim: finding the feature of ray 1 in other views…");
     const scene = encodeURIComponent(state.sceneName);
@@ -300,6 +324,7 @@ export async function autoAim(ctx, changed = () => {}) {
     const near = add(ray1.origin, scale(d, depth.near_m));
     const far = add(ray1.origin, scale(d, depth.far_m));
     const matches = [];
+    restore = hideExtras(ctx);
     for (let i = 0; i < views.length; i++) {
       if (state.measure !== m) return;
       const v = views[i];
@@ -345,6 +370,7 @@ export async function autoAim(ctx, changed = () => {}) {
   } finally {
     result.running = false;
     running = null;
+    if (restore) restore();
     if (moved && home) setCamera(viewer, home);
     viewer.scene.requestRender();
     window.gsgeo.autoaim = { last: { ...timings, added: result.added, declined: declined.map((x) => x.reason), text: result.text }, images };
