@@ -327,9 +327,10 @@ def test_stored_rays_many_equals_the_point_by_point_path():
     points, carries = [], []
     for k in range(12):
         rays = aim(rng, x + rng.normal(0, 5, 3), up, 10.0, n=2 + k % 4)
-        if k % 3 == 1:  # under a viewer modelMatrix that is a similarity
+        if k % 3:  # under a viewer modelMatrix: a similarity, or the identity
+            m = turn.matrix() if k % 3 == 1 else np.eye(4)
             for r in rays:
-                r["model_matrix"] = turn.matrix().T.reshape(-1).tolist()
+                r["model_matrix"] = m.T.reshape(-1).tolist()
                 r["pixel"], r["viewport"] = [10.0, 20.0], [800.0, 600.0]
         points.append(rays)
         carries.append(sim.matrix() if k % 2 else None)

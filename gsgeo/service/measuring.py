@@ -18,7 +18,14 @@ from typing import Any
 import numpy as np
 import orjson
 
-from gsgeo.crs.modelmatrix import is_similarity, matrix4, rendered_to_georeferenced
+from gsgeo.crs.modelmatrix import (
+    IDENTITY,
+    apply_directions,
+    apply_points,
+    invert_affine,
+    is_similarity,
+    matrix4,
+)
 from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.jsontypes import JSON, JSONObject
 from gsgeo.measure import Measurement, Rays, SolveSettings, measure_point
@@ -124,7 +131,13 @@ def stored_rays_many(stored: Sequence[list[JSONObject]],
             m = matrix4(key)
             if not is_similarity(m):
                 raise TypeError("a distorting model matrix: measured point by point")
-            o[rows], d[rows], _ = rendered_to_georeferenced(o[rows], d[rows], [m] * len(rows))
+            sel = np.asarray(rows)
+            if np.array_equal(m, IDENTITY):  # a georeferenced scene: rendered = georeferenced
+                d[sel] /= np.linalg.norm(d[sel], axis=1, keepdims=True)
+                continue
+            inv = invert_affine(m)
+            o[sel] = apply_points(inv, o[sel])
+            d[sel] = apply_directions(inv, d[sel])
         groups: dict[int, list[int]] = {}
         for k, c in enumerate(carries):
             if c is not None:
