@@ -42,6 +42,8 @@ from gsgeo.tiles.tileset import Tileset
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "white-sculpture"
 CRS = "EPSG:32617"
 IFOV = 1e-3
+#: The modelMatrix of a georeferenced scene as CesiumJS reports it (column-major identity).
+IDENTITY16 = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]
 
 
 def rays_at(rng: np.random.Generator, x: np.ndarray, up: np.ndarray, n: int = 4) -> list[dict]:
@@ -58,7 +60,10 @@ def rays_at(rng: np.random.Generator, x: np.ndarray, up: np.ndarray, n: int = 4)
         cam = x + rng.uniform(15, 25) * v
         d = x - cam
         d = d / np.linalg.norm(d) + rng.normal(0, 0.5 * IFOV, 3)
-        out.append({"origin": cam.tolist(), "direction": d.tolist(), "ifov": IFOV})
+        # as the viewer sends a click: the pixel, the canvas and the tileset's modelMatrix
+        out.append({"origin": cam.tolist(), "direction": d.tolist(), "ifov": IFOV,
+                    "pixel": [960.0, 540.0], "viewport": [1920.0, 1080.0],
+                    "model_matrix": IDENTITY16})
     return out
 
 
