@@ -442,6 +442,9 @@ async function submitProject(ev) {
     } else {
       p = await api("POST", "/projects", body);
     }
+    // the new project's settings are on show as the dialog closes, not a request later
+    state.project = p;
+    renderProjectInfo();
     $("#project-dialog").hidden = true;
     await loadProjects();
     await openProject(p.id);
