@@ -11,10 +11,7 @@ volume is 10 * 7 * 5 + 0.5 * 7 * 2.5 * 10 = 437.5 m^3.
 
 from __future__ import annotations
 
-import importlib.util
 import io
-import subprocess
-import sys
 import warnings
 
 import numpy as np
@@ -23,8 +20,9 @@ import pytest
 from gsgeo.crs import to_grid_many
 from gsgeo.demo import place, scene
 from gsgeo.demo.project import PROJECT_ID
+from tests.e2e.demoserver import demo_server
 from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS
-from tests.e2e.workplace import AIM_JS, ARTIFACTS, CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, REPO
+from tests.e2e.workplace import AIM_JS, ARTIFACTS, CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = pytest.mark.e2e
 
@@ -45,24 +43,7 @@ GROUND_RGBA = (0x8A, 0x93, 0x9B, 0.25)
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed")
-    if importlib.util.find_spec("playwright") is None:
-        pytest.skip("Playwright for Python is not installed")
-    if not CESIUM_JS.is_file():
-        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
-    from tests.servertools import start_server
-
-    data = tmp_path_factory.mktemp("building-tool") / "data"
-    r = subprocess.run([sys.executable, "-m", "gsgeo", "demo", "--data", str(data), "--no-serve"],
-                       cwd=REPO, capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stderr
-    proc, base = start_server(data)
-    try:
-        yield base
-    finally:
-        proc.terminate()
-        proc.communicate(timeout=10)
+    yield from demo_server(tmp_path_factory, "building-tool")
 
 
 @pytest.fixture(scope="module")

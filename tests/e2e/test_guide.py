@@ -13,16 +13,13 @@ server's splats.
 
 from __future__ import annotations
 
-import importlib.util
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
 from gsgeo.demo import place
 from gsgeo.demo.project import PROJECT_ID
-from tests.e2e.workplace import AIM_JS, CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, REPO
+from tests.e2e.demoserver import demo_server
+from tests.e2e.workplace import AIM_JS, CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = pytest.mark.e2e
 
@@ -56,24 +53,7 @@ OVERLAY_RGB_JS = """(pts) => { const c = document.querySelector('canvas.gsgeo-ov
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed")
-    if importlib.util.find_spec("playwright") is None:
-        pytest.skip("Playwright for Python is not installed")
-    if not CESIUM_JS.is_file():
-        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
-    from tests.servertools import start_server
-
-    data = tmp_path_factory.mktemp("guide") / "data"
-    r = subprocess.run([sys.executable, "-m", "gsgeo", "demo", "--data", str(data), "--no-serve"],
-                       cwd=REPO, capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stderr
-    proc, base = start_server(data)
-    try:
-        yield base
-    finally:
-        proc.terminate()
-        proc.communicate(timeout=10)
+    yield from demo_server(tmp_path_factory, "guide")
 
 
 @pytest.fixture(scope="module")
