@@ -36,6 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from gsgeo.aim.camera import Camera  # noqa: E402
+from gsgeo.aim.foreground import BALL_PX, foreground_of_click  # noqa: E402
 from gsgeo.aim.images import decode_image  # noqa: E402
 from gsgeo.aim.match import View, match_feature  # noqa: E402
 from gsgeo.solve import intersect  # noqa: E402
@@ -104,7 +105,8 @@ def capture(data: Path, dataset: Path, markers: list[str]) -> None:
                 pg.wait_for_selector("#measure-panel", state="hidden")
                 truth = (model @ np.r_[t.ecef, 1.0])[:3]
                 (dataset / f"{t.id}.json").write_text(json.dumps(
-                    dict(cur, id=t.id, truth_rendered_ecef=truth.tolist(), report=text)))
+                    dict(cur, id=t.id, truth_rendered_ecef=truth.tolist(), report=text,
+                         model_matrix=model.tolist())))
                 print(f"{t.id} {time.time() - t0:.0f} s: {text[:150]}", flush=True)
             browser.close()
     finally:
@@ -122,7 +124,15 @@ def view(v: dict, field: str) -> View:
                 camera(v["camera"]))
 
 
-def evaluate(dataset: Path, use_normal: bool, verbose: bool) -> dict:
+def evaluate(dataset: Path, use_normal: bool, verbose: bool, data: Path | None = None,
+             ball_px: float = BALL_PX) -> dict:
+    """The matcher on every captured pair (module docstring); with ``data`` (the demo's data
+    folder of the capture) the foreground of the click's splats weights the patches, as the
+    server does when the request names the scene."""
+    index = None
+    if data is not None:
+        from gsgeo.aim.splatindex import scene_index
+        index = scene_index(data / "scenes" / "demo" / "tileset.json")
     rows = []
     rays: dict[str, list] = {}
     truths: dict[str, np.ndarray] = {}
@@ -136,8 +146,14 @@ def evaluate(dataset: Path, use_normal: bool, verbose: bool) -> dict:
             click = np.asarray(body["reference"]["pixel"], float)
             normal = depth.get("normal_ecef") if use_normal else None
             t0 = time.perf_counter()
+            fg = None
+            if index is not None:
+                mm = rec.get("model_matrix")
+                fg = foreground_of_click(index, ref.camera, click, depth["depth_m"],
+                                         None if mm is None else np.asarray(mm), ball_px)
             res = match_feature(ref, click, tgt, depth["near_m"], depth["far_m"],
-                                depth["depth_m"], None if normal is None else np.asarray(normal))
+                                depth["depth_m"], None if normal is None else np.asarray(normal),
+                                fg)
             ms = (time.perf_counter() - t0) * 1e3
             row = {"marker": rec["id"], "view": k + 1, "ok": res.ok, "score": res.score,
                    "reason": res.reason, "ms": ms}
@@ -207,11 +223,17 @@ def main() -> None:
     e.add_argument("--dataset", type=Path, default=REPO / "benchmarks" / "out" / "automatch")
     e.add_argument("--normal", action="store_true", help="pass /depth's normal_ecef")
     e.add_argument("-v", action="store_true")
+    e.add_argument("--foreground", type=Path, metavar="DATA", nargs="?",
+                   const=REPO / "benchmarks" / "out" / "automatch-data",
+                   help="weight the patches by the splats about the click (the capture's data "
+                        "folder, default benchmarks/out/automatch-data)")
+    e.add_argument("--ball-px", type=float, default=BALL_PX,
+                   help="the foreground's ball radius, px of the reference view at the point")
     a = ap.parse_args()
     if a.cmd == "capture":
         capture(a.data, a.dataset, [m for m in a.markers.split(",") if m])
     else:
-        evaluate(a.dataset, a.normal, a.v)
+        evaluate(a.dataset, a.normal, a.v, a.foreground, a.ball_px)
 
 
 if __name__ == "__main__":

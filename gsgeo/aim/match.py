@@ -45,6 +45,7 @@ import cv2
 import numpy as np
 
 from gsgeo.aim.camera import Camera, closest_on_first
+from gsgeo.aim.foreground import Foreground
 from gsgeo.aim.views import local_axes
 from gsgeo.solve.linalg import FloatArray
 
@@ -74,6 +75,13 @@ EDGE_ON = 0.2
 SAME_PLANE = 0.985
 #: Matching back from the target view must land this close to the click (px).
 BACK_MATCH_PX = 1.0
+#: With the splats known (a Foreground), the reference patch's pixels are weighted by the
+#: foreground's opacity, computed this far (px) about the click; a patch whose weight is
+#: FULL_COVER or more of its pixels is matched whole (a surface: nothing to leave out), one
+#: with less than MIN_COVER_PX pixels' worth declines (too little of the feature to match).
+MASK_REACH_PX = 2 * HALF_PX
+FULL_COVER = 0.97
+MIN_COVER_PX = 40.0
 #: Iterations and step (px) at which the sub-pixel alignment stops.
 ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4)
 
@@ -164,18 +172,25 @@ def parabola_offset(a: float, b: float, c: float) -> float:
     return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
 
 
-def refine(templ: np.ndarray, strip: np.ndarray, col: int, row: int, ds: float, dw: float
-           ) -> tuple[float, float]:
+def refine(templ: np.ndarray, strip: np.ndarray, col: int, row: int, ds: float, dw: float,
+           weights: np.ndarray | None = None) -> tuple[float, float]:
     """Sub-pixel offsets of the template placed at integer (col, row) of the strip, starting
     from the parabola's (ds, dw): the translation that best aligns the two images
     (``cv2.findTransformECC``, enhanced correlation coefficient). The parabola through the
     NCC samples is biased by up to ~0.15 px towards the sample; the alignment is not. Keeps
-    the parabola's answer when the alignment fails or leaves the peak's pixel."""
+    the parabola's answer when the alignment fails or leaves the peak's pixel. With
+    ``weights`` (the template's foreground) only the template's pixels weighing 1/2 or more
+    are aligned."""
     warp = np.array([[1.0, 0.0, col + ds], [0.0, 1.0, row + dw]], dtype=np.float32)
     try:
         everywhere = np.full(strip.shape, 255, dtype=np.uint8)
-        _, found = cv2.findTransformECC(templ, strip, warp, cv2.MOTION_TRANSLATION,
-                                        ECC_CRITERIA, everywhere, 1)
+        if weights is None:
+            _, found = cv2.findTransformECC(templ, strip, warp, cv2.MOTION_TRANSLATION,
+                                            ECC_CRITERIA, everywhere, 1)
+        else:
+            used = np.where(weights >= 0.5, 255, 0).astype(np.uint8)
+            _, found = cv2.findTransformECCWithMask(templ, strip, used, everywhere, warp,
+                                                    cv2.MOTION_TRANSLATION, ECC_CRITERIA, 1)
     except cv2.error:          # not converged (e.g. too little texture): keep the parabola
         return ds, dw
     shift = np.asarray(found, dtype=np.float64)[:, 2]
@@ -199,13 +214,42 @@ def depth_samples(near: float, far: float, depth: float) -> FloatArray:
     return out
 
 
+def weighted_std(img: np.ndarray, weights: np.ndarray | None) -> float:
+    """The standard deviation of an image's grey levels, each pixel weighted (None: alike)."""
+    if weights is None:
+        return float(img.std())
+    total = float(weights.sum())
+    if total <= 0:
+        return 0.0
+    mean = float((img * weights).sum()) / total
+    return math.sqrt(max(float((weights * (img - mean) ** 2).sum()) / total, 0.0))
+
+
+def reference_weights(ref: View, click: FloatArray, foreground: Foreground) -> np.ndarray:
+    """The foreground's opacity (gsgeo.aim.foreground) at each pixel of the reference image
+    within MASK_REACH_PX of the click, 0 elsewhere: (H, W) float32 like ``ref.image``."""
+    ih, iw = ref.image.shape
+    out = np.zeros((ih, iw), dtype=np.float32)
+    cx, cy = np.asarray(click, dtype=np.float64) - ref.origin - 0.5
+    i0, i1 = max(int(round(cx)) - MASK_REACH_PX, 0), min(int(round(cx)) + MASK_REACH_PX, iw - 1)
+    j0, j1 = max(int(round(cy)) - MASK_REACH_PX, 0), min(int(round(cy)) + MASK_REACH_PX, ih - 1)
+    if i1 < i0 or j1 < j0:
+        return out
+    xs = ref.origin[0] + np.arange(i0, i1 + 1) + 0.5
+    ys = ref.origin[1] + np.arange(j0, j1 + 1) + 0.5
+    out[j0:j1 + 1, i0:i1 + 1] = foreground.opacity(ref.camera, xs, ys)
+    return out
+
+
 def warped_patch(ref: View, tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
-                 ray: FloatArray, t: float, normal: FloatArray, click: FloatArray
-                 ) -> tuple[np.ndarray, float] | str:
+                 ray: FloatArray, t: float, normal: FloatArray, click: FloatArray,
+                 weights: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray | None, float] | str:
     """The reference patch around the click as the target view would show it in the strip
     frame if the feature lay at depth ``t`` on the plane with ``normal`` (2 HALF_PX + 1
-    square, the click at its centre), and the strip column of that centre; a decline reason
-    instead when the plane or patch does not map."""
+    square, the click at its centre), its pixels' weights (``weights``, the reference
+    image's, warped alike; None without) and the strip column of that centre; a decline
+    reason instead when the plane or patch does not map or too little of it weighs."""
     h = HALF_PX
     hom = plane_homography(ref.camera, tgt.camera, origin + t * ray, normal,
                            ref.origin, tgt.origin, click, 2.0 * h)
@@ -218,26 +262,35 @@ def warped_patch(ref: View, tgt: View, strip_from_target: np.ndarray, origin: Fl
         return "outside the view: the click does not map into the target view"
     c = c[:2] / c[2]
     shift = np.array([[1.0, 0.0, c[0] - h], [0.0, 1.0, c[1] - h], [0.0, 0.0, 1.0]])
-    templ = cv2.warpPerspective(ref.image, np.linalg.inv(strip_from_ref) @ shift,
-                                (2 * h + 1, 2 * h + 1),
+    back = np.linalg.inv(strip_from_ref) @ shift
+    templ = cv2.warpPerspective(ref.image, back, (2 * h + 1, 2 * h + 1),
                                 flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
     if float(templ.min()) < 0.0:
         return "outside the view: the warped patch reaches beyond the reference image"
-    if float(templ.std()) < MIN_TEXTURE:
+    tmask = None
+    if weights is not None:
+        tmask = cv2.warpPerspective(weights, back, (2 * h + 1, 2 * h + 1),
+                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                    borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        if float(tmask.sum()) < MIN_COVER_PX:
+            return (f"weak: the feature covers {float(tmask.sum()):.0f} px of the patch around "
+                    f"the click, below {MIN_COVER_PX:.0f}")
+    if weighted_std(templ, tmask) < MIN_TEXTURE:
         return "weak: no texture around the click to match"
-    return templ, float(c[0])
+    return templ, tmask, float(c[0])
 
 
 @dataclass(frozen=True)
 class Sweep:
     """The NCC of the strip against the patch warped for each depth of the sweep on one plane
     orientation: ``score`` (rows: offsets from the line, columns along it), the warped
-    patches and, per column, the patch that scored it."""
+    patches and their weights (None: alike) and, per column, the patch that scored it."""
 
     score: np.ndarray
     templates: list[np.ndarray]
     owner: np.ndarray
+    masks: list[np.ndarray | None]
 
     @property
     def peak(self) -> float:
@@ -246,20 +299,21 @@ class Sweep:
 
 def sweep(ref: View, tgt: View, strip: np.ndarray, strip_from_target: np.ndarray,
           origin: FloatArray, ray: FloatArray, normal: FloatArray, click: FloatArray,
-          depths: FloatArray) -> Sweep | str:
+          depths: FloatArray, weights: np.ndarray | None = None) -> Sweep | str:
     """NCC along the strip of the patch warped for each depth on planes with ``normal``
     (each warp scores the columns nearest its depth's own); a reason when no warp maps (a
     depth whose plane maps the patch beyond the reference image, e.g. one very close to the
     target camera, is left out and its columns go to the nearest depth that maps)."""
     h = HALF_PX
-    templates, columns, reasons = [], [], []
+    templates, masks, columns, reasons = [], [], [], []
     for t in depths.tolist():
-        got = warped_patch(ref, tgt, strip_from_target, origin, ray, t, normal, click)
+        got = warped_patch(ref, tgt, strip_from_target, origin, ray, t, normal, click, weights)
         if isinstance(got, str):
             reasons.append(got)
             continue
         templates.append(got[0])
-        columns.append(got[1] - h)                      # score column of that depth
+        masks.append(got[1])
+        columns.append(got[2] - h)                      # score column of that depth
     if not templates:
         return reasons[0]
     n_cols = strip.shape[1] - 2 * h
@@ -268,10 +322,14 @@ def sweep(ref: View, tgt: View, strip: np.ndarray, strip_from_target: np.ndarray
     for j in np.unique(owner).tolist():
         cols = np.flatnonzero(owner == j)
         c0, c1 = int(cols[0]), int(cols[-1])
-        part = cv2.matchTemplate(strip[:, c0:c1 + 2 * h + 1], templates[j],
-                                 cv2.TM_CCOEFF_NORMED)
+        if masks[j] is None:
+            part = cv2.matchTemplate(strip[:, c0:c1 + 2 * h + 1], templates[j],
+                                     cv2.TM_CCOEFF_NORMED)
+        else:
+            part = cv2.matchTemplate(strip[:, c0:c1 + 2 * h + 1], templates[j],
+                                     cv2.TM_CCOEFF_NORMED, mask=masks[j])
         score[:, c0:c1 + 1] = np.where(owner[c0:c1 + 1] == j, part, score[:, c0:c1 + 1])
-    return Sweep(np.nan_to_num(np.clip(score, -1.0, 1.0), nan=-1.0), templates, owner)
+    return Sweep(np.nan_to_num(np.clip(score, -1.0, 1.0), nan=-1.0), templates, owner, masks)
 
 
 def plane_normals(ref: Camera, tgt: Camera, point: FloatArray, normal: FloatArray | None
@@ -302,7 +360,8 @@ def plane_normals(ref: Camera, tgt: Camera, point: FloatArray, normal: FloatArra
 
 
 def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: float,
-                  depth: float, normal: FloatArray | None = None) -> MatchResult:
+                  depth: float, normal: FloatArray | None = None,
+                  foreground: Foreground | None = None) -> MatchResult:
     """The click of the reference view found in the target view (module docstring), and
     confirmed by matching back: the patch around the match, searched for in the reference
     view along the target ray's segment over the same stretch of space, must lead back to
@@ -311,8 +370,10 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
 
     ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
     reference ray (near <= depth <= far); ``normal``: the surface's normal there (rendered
-    ECEF, any length; either sign) when known."""
-    there = match_one_way(ref, click, tgt, near, far, depth, normal)
+    ECEF, any length; either sign) when known; ``foreground``: the splats about the
+    feature (gsgeo.aim.foreground), when known: each patch's pixels are weighted by their
+    opacity, so the background around an object's outline does not enter the match."""
+    there = match_one_way(ref, click, tgt, near, far, depth, normal, foreground=foreground)
     if not there.ok or there.pixel is None or there.depth_m is None:
         return there
     o, d = ref.camera.position, ref.camera.pick_ray(click)[0]
@@ -326,7 +387,8 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     # to a few millimetres when the two rays are perpendicular, and matching back declined)
     back = match_one_way(tgt, there.pixel, ref,
                          max(t_back - (there.depth_m - near), 1e-3),
-                         t_back + (far - there.depth_m), t_back, there.plane, only_normal=True)
+                         t_back + (far - there.depth_m), t_back, there.plane, only_normal=True,
+                         foreground=foreground)
     if not back.ok or back.pixel is None:
         return declined(f"inconsistent: matching back from the target view fails "
                         f"({back.reason})", there.score, there.second)
@@ -338,11 +400,12 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
 
 
 def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: float,
-                  depth: float, normal: FloatArray | None = None, only_normal: bool = False
-                  ) -> MatchResult:
+                  depth: float, normal: FloatArray | None = None, only_normal: bool = False,
+                  foreground: Foreground | None = None) -> MatchResult:
     """The click of the reference view found in the target view, one way (module docstring);
     with ``only_normal`` the patch is warped by the plane of ``normal`` alone (matching
-    back, on the plane the way there found).
+    back, on the plane the way there found); with ``foreground`` the patch's pixels are
+    weighted by its opacity (unless it covers FULL_COVER of the patch or more).
 
     ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
     reference ray (near <= depth <= far); ``normal``: the surface's normal there (rendered
@@ -358,7 +421,14 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     if i0 < 0 or j0 < 0 or i0 + 2 * h >= iw or j0 + 2 * h >= ih:
         return declined("outside the view: the patch around the click reaches beyond the "
                         "reference image")
-    if float(ref.image[j0:j0 + 2 * h + 1, i0:i0 + 2 * h + 1].std()) < MIN_TEXTURE:
+    weights = None
+    if foreground is not None:
+        weights = reference_weights(ref, click, foreground)
+        if float(weights[j0:j0 + 2 * h + 1, i0:i0 + 2 * h + 1].mean()) >= FULL_COVER:
+            weights = None
+    if weighted_std(ref.image[j0:j0 + 2 * h + 1, i0:i0 + 2 * h + 1],
+                    None if weights is None else weights[j0:j0 + 2 * h + 1, i0:i0 + 2 * h + 1]
+                    ) < MIN_TEXTURE:
         return declined("weak: no texture around the click to match")
     # the epipolar segment in the target image, where the whole template fits
     seg = tgt.camera.epipolar_segment(o, d, near, far)
@@ -394,13 +464,13 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     planes = plane_normals(ref.camera, tgt.camera, o + depth * d, normal)
     if only_normal and normal is not None:
         planes = planes[:1]
-    tried = [(n, sweep(ref, tgt, strip, strip_from_target, o, d, n, click, depths))
+    tried = [(n, sweep(ref, tgt, strip, strip_from_target, o, d, n, click, depths, weights))
              for n in planes]
     found = [(n, sw) for n, sw in tried if isinstance(sw, Sweep)]
     if not found:
         return declined(next(sw for _, sw in tried if isinstance(sw, str)))
     normal_used, best = max(found, key=lambda item: item[1].peak)
-    score, templates, owner = best.score, best.templates, best.owner
+    score, templates, owner, masks = best.score, best.templates, best.owner, best.masks
     # rows: offsets -(b+ext)..(b+ext) from the line; columns: -ext..n_s-1+ext along it
     inner = score[ext:ext + 2 * b + 1, ext:ext + n_s]
     w_pk, s_pk = (int(v) for v in np.unravel_index(int(np.argmax(inner)), inner.shape))
@@ -425,13 +495,14 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     ds = parabola_offset(score[rw, rs - 1], score[rw, rs], score[rw, rs + 1])
     dw = parabola_offset(score[rw - 1, rs], score[rw, rs], score[rw + 1, rs])
     # the sub-pixel alignment with the patch warped for the depth the peak itself lies at
-    templ = templates[int(owner[rs])]
+    templ, tmask = templates[int(owner[rs])], masks[int(owner[rs])]
     coarse = p0 + (s_pk + ds) * u + (w_pk - b + dw) * v + tgt.origin + 0.5
     t_pk = closest_on_first(o, d, tgt.camera.position, tgt.camera.pick_ray(coarse)[0])
     if math.isfinite(t_pk) and t_pk > 0:
-        got = warped_patch(ref, tgt, strip_from_target, o, d, t_pk, normal_used, click)
-        templ = templ if isinstance(got, str) else got[0]
-    ds, dw = refine(templ, strip, rs, rw, ds, dw)
+        got = warped_patch(ref, tgt, strip_from_target, o, d, t_pk, normal_used, click,
+                           weights)
+        templ, tmask = (templ, tmask) if isinstance(got, str) else (got[0], got[1])
+    ds, dw = refine(templ, strip, rs, rw, ds, dw, tmask)
     s, w = s_pk + ds, w_pk - b + dw
     img_pt = p0 + s * u + w * v
     pixel = img_pt + tgt.origin + 0.5
