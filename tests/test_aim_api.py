@@ -142,6 +142,31 @@ def test_match_of_a_bad_request_is_422_naming_the_field(served, change, field):
     assert field in r.json()["message"], r.json()["message"]
 
 
+def test_scene_match_weights_by_the_splats_and_checks_its_scene(served):
+    """POST /api/scenes/{scene}/match: the plane's splats placed by the modelMatrix where the
+    synthetic views see their plane cover the whole patch, so the answer is the plain
+    match's; an unknown scene is 404, a static host's 409, a singular matrix 422."""
+    from aim_helpers import AXES, ORIGIN
+
+    client, m = served
+    body, px = _match_body()
+    to_render = np.eye(4)
+    to_render[:3, :3], to_render[:3, 3] = AXES, ORIGIN
+    mm = to_render @ np.linalg.inv(m)                      # tileset ECEF -> local -> views'
+    body["model_matrix"] = mm.T.reshape(-1).tolist()       # column-major
+    r = client.post("/api/scenes/plane/match", json=body)
+    assert r.status_code == 200, r.text
+    plain = client.post("/api/match", json=body).json()
+    assert r.json()["ok"] is True and plain["ok"] is True
+    assert np.allclose(r.json()["pixel"], plain["pixel"], atol=1e-6)
+    assert np.linalg.norm(np.array(r.json()["pixel"]) - px) < 0.3
+    assert client.post("/api/scenes/nosuch/match", json=body).status_code == 404
+    assert client.post("/api/scenes/hosted/match", json=body).status_code == 409
+    body["model_matrix"] = [0.0] * 15 + [1.0]
+    r = client.post("/api/scenes/plane/match", json=body)
+    assert r.status_code == 422 and "model_matrix" in r.json()["message"], r.text
+
+
 # /api/scenes/{scene}/views ------------------------------------------------------------------
 def _views_body(m: np.ndarray, **extra) -> dict:
     point = (m[:3, :3] @ [1.0, 1.0, 0.0] + m[:3, 3]).tolist()

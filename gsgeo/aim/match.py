@@ -422,7 +422,7 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
         return declined("outside the view: the patch around the click reaches beyond the "
                         "reference image")
     weights = None
-    if foreground is not None:
+    if foreground is not None and foreground.count > 0:     # no splats there: nothing to weigh
         weights = reference_weights(ref, click, foreground)
         if float(weights[j0:j0 + 2 * h + 1, i0:i0 + 2 * h + 1].mean()) >= FULL_COVER:
             weights = None

@@ -1,8 +1,10 @@
 """Routes of the aiming aids (gsgeo.service.aiming): depth hint, suggested views, matching.
 
-POST /api/scenes/{scene}/depth, POST /api/scenes/{scene}/views and POST /api/match. The
-scene routes read the scene's splats, so they need its tiles on this server: 404 for an
-unknown scene, 409 when its tiles are served from a static host.
+POST /api/scenes/{scene}/depth, POST /api/scenes/{scene}/views, POST /api/match and POST
+/api/scenes/{scene}/match (the same, its patches weighted by the scene's splats about the
+click: gsgeo.aim.foreground). The scene routes read the scene's splats, so they need its
+tiles on this server: 404 for an unknown scene, 409 when its tiles are served from a static
+host.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from gsgeo.errors import InputError
 from gsgeo.limits import SIGMA_PX_MAX, SIGMA_PX_MIN
 from gsgeo.measure import Rays as RayArrays
 from gsgeo.server.api import ErrorBody
-from gsgeo.server.models import Ray, rays_of
+from gsgeo.server.models import Mat16, Ray, rays_of
 from gsgeo.server.scenes import SceneFolders
 from gsgeo.service import ConflictError, NotFoundError
 from gsgeo.service.aiming import depth_on_ray, match_views, views_for_point
@@ -121,6 +123,9 @@ class MatchRequest(BaseModel):
     reference: ReferenceView
     target: TargetView
     depth: DepthRange
+    model_matrix: Mat16 | None = Field(
+        None, description="the tileset's modelMatrix at the click, 16 numbers, column-major "
+                          "(the scene route places the splats by it; identity when absent)")
 
 
 class MatchAnswer(BaseModel):
@@ -138,6 +143,15 @@ class MatchAnswer(BaseModel):
 def match(body: MatchRequest) -> dict[str, Any]:
     return match_views(body.reference.model_dump(), body.target.model_dump(),
                        body.depth.model_dump())
+
+
+@router.post("/scenes/{scene}/match", response_model=MatchAnswer,
+             summary="Find the reference view's click in the target view, the patches weighted "
+                     "by the scene's splats about the click (its outline's background left out)")
+def scene_match(scene: SceneName, body: MatchRequest, request: Request) -> dict[str, Any]:
+    folder = scene_folder(request, scene)
+    return match_views(body.reference.model_dump(), body.target.model_dump(),
+                       body.depth.model_dump(), folder, body.model_matrix)
 
 
 class ViewsRequest(BaseModel):

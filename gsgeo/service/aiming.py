@@ -14,10 +14,12 @@ import numpy as np
 
 from gsgeo.aim.camera import Camera
 from gsgeo.aim.depth import depth_hint
+from gsgeo.aim.foreground import foreground_of_click
 from gsgeo.aim.images import decode_image
 from gsgeo.aim.match import View, match_feature
 from gsgeo.aim.splatindex import SplatIndex, scene_index
 from gsgeo.aim.views import suggest_views
+from gsgeo.crs.modelmatrix import invert_affine, matrix4
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.measure import Rays
 from gsgeo.store import ConflictError, NotFoundError
@@ -79,11 +81,15 @@ def view_of(doc: dict[str, Any], field: str) -> View:
 
 
 def match_views(reference: dict[str, Any], target: dict[str, Any],
-                depth: dict[str, Any]) -> dict[str, Any]:
+                depth: dict[str, Any], scene_dir: Path | None = None,
+                model_matrix: Any = None) -> dict[str, Any]:
     """The reference click found in the target view (gsgeo.aim.match.match_feature), as the
     JSON of POST /api/match. ``depth`` holds near_m, far_m and depth_m along the reference
     ray (metres, from /depth) and optionally its normal_ecef; InputError names the field of a
-    value that cannot be used."""
+    value that cannot be used. With ``scene_dir`` (POST /api/scenes/{scene}/match) the
+    scene's splats about the depth hint's point weight the patches (gsgeo.aim.foreground:
+    the background around an object's outline is left out); ``model_matrix`` (16 numbers,
+    column-major, the tileset's at the click; None: identity) places them as rendered."""
     near, far, hint = (float(depth[k]) for k in ("near_m", "far_m", "depth_m"))
     if not 0.0 <= near <= far:
         raise InputError("near_m must be >= 0 and <= far_m", field="depth.near_m")
@@ -95,9 +101,19 @@ def match_views(reference: dict[str, Any], target: dict[str, Any],
     ref = view_of(reference, "reference")
     tgt = view_of(target, "target")
     pixel = np.asarray(reference["pixel"], dtype=np.float64)
+    foreground = None
+    if scene_dir is not None:
+        mm = None
+        if model_matrix is not None:
+            try:
+                mm = matrix4(model_matrix)
+                invert_affine(mm)
+            except InputError as exc:
+                raise exc.at("model_matrix") from None
+        foreground = foreground_of_click(scene_splats(scene_dir), ref.camera, pixel, hint, mm)
     return match_feature(ref, pixel, tgt, near, far, hint,
-                         None if normal is None else np.asarray(normal, dtype=np.float64)
-                         ).to_json()
+                         None if normal is None else np.asarray(normal, dtype=np.float64),
+                         foreground).to_json()
 
 
 def views_for_point(scene_dir: Path, rays: Rays, point: Any, k: int, fovy: float,
