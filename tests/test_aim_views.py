@@ -9,7 +9,13 @@ import time
 import numpy as np
 from aim_helpers import EAST, NORTH, UP, index_of, plane_splats, to_ecef, wall_splats
 
-from gsgeo.aim.views import MIN_SEPARATION_DEG, Occlusion, suggest_views
+from gsgeo.aim.views import (
+    MIN_SEPARATION_DEG,
+    NONPLANAR_MAX_DEG,
+    Occlusion,
+    planar_about,
+    suggest_views,
+)
 from gsgeo.solve import intersect
 
 FOVY, W, H = math.radians(60.0), 1280.0, 720.0
@@ -157,3 +163,32 @@ def test_views_do_not_see_the_ground_at_grazing_incidence():
         # without the splats (no surface known) the choice is the covariance's alone
         free = suggest_views(None, o, POINT - o, np.array([1e-3]), POINT, 4, FOVY, W, H)
         assert len(free) == 4
+
+
+def test_views_of_a_corner_stay_near_the_first_ray():
+    """The foot of a wall (ground and wall splats about the point: not one plane) clicked
+    from the west at 45 degrees: every view lies within NONPLANAR_MAX_DEG of the click's ray,
+    at least MIN_SEPARATION_DEG from it, and they are spread round it; the same click on the
+    ground alone gets wider views (the plane's warp holds there)."""
+    a = math.radians(45.0)
+    o = np.array([POINT + 12.0 * (-math.cos(a) * EAST + math.sin(a) * UP)])
+    d = POINT - o
+    corner = index_of(plane_splats(), wall_splats(0.0, top=4.0))
+    assert not planar_about(corner, POINT, 0.4)
+    assert planar_about(index_of(plane_splats()), POINT, 0.4)
+    views = suggest_views(corner, o, d, np.array([1e-3]), POINT, 4, FOVY, W, H)
+    assert len(views) == 4
+    unit = d[0] / np.linalg.norm(d[0])
+    backs = []
+    for v in views:
+        look = POINT - v.camera.position
+        look /= np.linalg.norm(look)
+        angle = math.degrees(math.acos(float(np.clip(look @ unit, -1, 1))))
+        assert MIN_SEPARATION_DEG - 1e-6 <= angle <= NONPLANAR_MAX_DEG + 1e-6, angle
+        assert (v.camera.position - POINT) @ EAST < 0            # the wall's west side
+        backs.append(-look)
+    backs = np.array(backs)
+    cos = backs @ backs.T - 2 * np.eye(len(backs))
+    assert np.degrees(np.arccos(cos.max())) >= MIN_SEPARATION_DEG - 1e-6
+    wide = suggest_views(index_of(plane_splats()), o, d, np.array([1e-3]), POINT, 4, FOVY, W, H)
+    assert max(v.min_angle_deg for v in wide) > 60.0

@@ -16,6 +16,14 @@ ray, up to a little before the point) add up to opacity 1/2; occluded candidates
 only when no unoccluded one is left. Where the first ray meets flat splats (a surface with a
 normal, gsgeo.aim.depth), views that see that surface at less than MIN_INCIDENCE_DEG come
 after all others: the feature is a sliver there, for image matching as for a click.
+
+Where the splats about the point do not lie on one plane (an eaves corner, a pole's top,
+a post with its rail: their weighted spread's thinnest axis is not much thinner than the
+next, :func:`planar_about`), the views are kept within NONPLANAR_MAX_DEG of the first
+ray: the matcher (gsgeo.aim.match) warps the click's patch by a plane, which is right about
+a corner only for a small change of view, and a corner seen from 90 degrees round shows
+other faces than the click's. Intersection at 20-35 degrees still gives the point to a
+few times the pixel footprint from one such ray, better from several.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ import numpy as np
 
 from gsgeo.aim.camera import Camera
 from gsgeo.aim.depth import HIT_OPACITY, depth_hint, ray_profile
+from gsgeo.aim.foreground import BALL_PX, Foreground
 from gsgeo.aim.splatindex import SplatIndex
 from gsgeo.crs.ellipsoid import ecef_to_geodetic_closed_form, enu_rotation
 from gsgeo.crs.modelmatrix import apply_points, invert_affine
@@ -41,6 +50,11 @@ MIN_SEPARATION_DEG = 20.0
 #: Views whose line of sight meets the surface (where its splats are flat) at less than this
 #: angle are chosen only when no other is left.
 MIN_INCIDENCE_DEG = 20.0
+#: Where the splats about the point are not one plane, views lie within this angle of the
+#: first ray (degrees); the splats count as one plane when the standard deviation of their
+#: centres across their thinnest axis is at most PLANAR_RATIO of that across the next one.
+NONPLANAR_MAX_DEG = 35.0
+PLANAR_RATIO = 0.15
 #: The stretch of a candidate's ray before the point not tested for occlusion: the point's
 #: own surface (a share of the range, and at least this many metres).
 POINT_CLEARANCE = 0.02
@@ -125,6 +139,10 @@ def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: Flo
     cams = p + rng * back
     alone = predicted_traces(o, d, f, cams, -back, f_new, sigma_px)
     angles = np.degrees(np.arccos(np.clip(-back @ d.T, -1.0, 1.0))).min(axis=1)
+    if index is not None and not planar_about(index, p, BALL_PX * f[0] * rng, model_matrix):
+        near_first = np.degrees(np.arccos(np.clip(-back @ d[0], -1.0, 1.0))) \
+            <= NONPLANAR_MAX_DEG
+        alone = np.where(near_first, alone, np.inf)     # not a candidate
     occlusion = Occlusion(index, p, model_matrix, f_new)
     # a view that sees the surface at grazing incidence (or from behind) comes last: its
     # image of the feature is a sliver, for the matcher as for the operator's click
@@ -158,6 +176,21 @@ def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: Flo
                                  float(np.degrees(el[i])), float(angles[i]),
                                  float(math.sqrt(alone[i])), occluded))
     return out
+
+
+def planar_about(index: SplatIndex, point: FloatArray, radius_m: float,
+                 model_matrix: FloatArray | None = None) -> bool:
+    """Whether the splats whose centres lie within ``radius_m`` (metres) of ``point``
+    (rendered ECEF) lie on one plane: the alpha-weighted standard deviation of the centres
+    along their thinnest principal axis is at most PLANAR_RATIO of that along the middle one.
+    Fewer than 4 splats there count as planar (nothing to tell)."""
+    fg = Foreground.near(index, point, radius_m, model_matrix)
+    if fg.count < 4:
+        return True
+    w = fg.alpha / float(fg.alpha.sum())
+    c = fg.centres - w @ fg.centres
+    lam = np.linalg.eigvalsh((c * w[:, None]).T @ c)               # ascending
+    return bool(math.sqrt(max(lam[0], 0.0)) <= PLANAR_RATIO * math.sqrt(max(lam[1], 0.0)))
 
 
 def surface_at(index: SplatIndex | None, origin: FloatArray, direction: FloatArray,
