@@ -31,6 +31,7 @@ RAY_KEYS = ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")
 #: Members of a stored ray that say how it was aimed (matched automatically or clicked, the
 #: match score), kept with it and never read by the solver.
 RAY_PROVENANCE_KEYS = ("auto", "score")
+_IDENTITY4 = np.eye(4)
 
 
 def _optional_rows(values: Sequence[ArrayLike | None] | np.ndarray | None, n: int,
@@ -199,10 +200,14 @@ class Rays:
         return int(self.origins.shape[0])
 
     def model_matrix(self, i: int) -> FloatArray | None:
-        """The (4, 4) modelMatrix of ray ``i``, None for identity (none given)."""
-        if self.model_matrices is None or np.all(np.isnan(self.model_matrices[i])):
+        """The (4, 4) modelMatrix of ray ``i``, None for identity (none given, or exactly the
+        identity given: every ray of a georeferenced scene; so it is not stored either)."""
+        if self.model_matrices is None:
             return None
-        return self.model_matrices[i]
+        m = self.model_matrices[i]
+        if np.isnan(m[0, 0]) or np.array_equal(m, _IDENTITY4):
+            return None
+        return m
 
     def angular_ifov(self) -> FloatArray | None:
         """ifov (N,) of every ray for the angular model, None for the unweighted model.
