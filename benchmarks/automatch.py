@@ -94,7 +94,14 @@ def capture(data: Path, dataset: Path, markers: list[str]) -> None:
                 az = float(np.degrees(np.arctan2(t.local[0] - cx, t.local[1] - cy)))
                 a = pg.evaluate(AIM_JS, [list(t.ecef), az, ELEVATION, RANGE, OFFSET])
                 pg.mouse.click(a["x"], a["y"])
-                pg.wait_for_function("gsgeo.state.measure.rays.length === 1")
+                try:
+                    pg.wait_for_function("gsgeo.state.measure.rays.length === 1",
+                                         timeout=120_000)
+                except Exception as exc:            # noqa: BLE001 - one marker lost, not all
+                    print(f"{t.id}: the click gave no ray ({exc.__class__.__name__}); skipped",
+                          flush=True)
+                    pg.keyboard.press("Escape")
+                    continue
                 pg.keyboard.press("a")
                 pg.wait_for_function("gsgeo.state.measure.autoaim && "
                                      "!gsgeo.state.measure.autoaim.running",

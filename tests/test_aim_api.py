@@ -144,8 +144,9 @@ def test_match_of_a_bad_request_is_422_naming_the_field(served, change, field):
 
 def test_scene_match_weights_by_the_splats_and_checks_its_scene(served):
     """POST /api/scenes/{scene}/match: the plane's splats placed by the modelMatrix where the
-    synthetic views see their plane cover the whole patch, so the answer is the plain
-    match's; an unknown scene is 404, a static host's 409, a singular matrix 422."""
+    synthetic views see their plane cover the whole patch and have its shape, so the answer
+    is the plain match's (within 0.05 px); an unknown scene is 404, a static host's 409, a
+    singular matrix 422."""
     from aim_helpers import AXES, ORIGIN
 
     client, m = served
@@ -158,7 +159,7 @@ def test_scene_match_weights_by_the_splats_and_checks_its_scene(served):
     assert r.status_code == 200, r.text
     plain = client.post("/api/match", json=body).json()
     assert r.json()["ok"] is True and plain["ok"] is True
-    assert np.allclose(r.json()["pixel"], plain["pixel"], atol=1e-6)
+    assert np.allclose(r.json()["pixel"], plain["pixel"], atol=0.05)
     assert np.linalg.norm(np.array(r.json()["pixel"]) - px) < 0.3
     assert client.post("/api/scenes/nosuch/match", json=body).status_code == 404
     assert client.post("/api/scenes/hosted/match", json=body).status_code == 409

@@ -88,11 +88,18 @@ class Foreground:
     def opacity(self, camera: Camera, xs: FloatArray, ys: FloatArray) -> np.ndarray:
         """The foreground opacity (len(ys), len(xs)) float32, 0..1, at the pixels whose
         centres are at window coordinates (xs[i], ys[j]) (CSS px) in ``camera``'s view."""
+        return self.surface(camera, xs, ys)[0]
+
+    def surface(self, camera: Camera, xs: FloatArray, ys: FloatArray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """The foreground opacity (as :meth:`opacity`) and the depth of the foreground there
+        (len(ys), len(xs)) float64: metres along the camera's axis, the mean of the splats'
+        centre depths weighted by their alpha at the pixel; NaN where no splat reaches."""
         xs = np.asarray(xs, dtype=np.float64).reshape(-1)
         ys = np.asarray(ys, dtype=np.float64).reshape(-1)
         log_clear = np.zeros((ys.size, xs.size), dtype=np.float64)
         if self.count == 0 or xs.size == 0 or ys.size == 0:
-            return log_clear.astype(np.float32)
+            return log_clear.astype(np.float32), np.full(log_clear.shape, np.nan)
         rel = self.centres - camera.position
         z = rel @ camera.direction
         x = rel @ camera.right
@@ -124,10 +131,13 @@ class Foreground:
         ok = (det > 0) & (u + reach >= xs.min()) & (u - reach <= xs.max()) \
             & (v + reach >= ys.min()) & (v - reach <= ys.max())
         u, v, c2, det, alpha, reach = u[ok], v[ok], c2[ok], det[ok], alpha[ok], reach[ok]
+        z = z[ok]
         a00, a01, a11 = c2[:, 1, 1] / det, -c2[:, 0, 1] / det, c2[:, 0, 0] / det
         half = np.minimum(2 ** np.ceil(np.log2(np.maximum(reach, 1.0))),
                           max(xs.size, ys.size)).astype(np.int64)
         acc = np.zeros(xs.size * ys.size, dtype=np.float64)
+        wsum = np.zeros(xs.size * ys.size, dtype=np.float64)
+        zsum = np.zeros(xs.size * ys.size, dtype=np.float64)
         for r in np.unique(half).tolist():
             sel = np.flatnonzero(half == r)
             off = np.arange(-r, r + 1)
@@ -146,8 +156,14 @@ class Foreground:
                     & (a >= MIN_ALPHA)
                 flat = np.broadcast_to(jj * xs.size + ii, inside.shape)[inside]
                 acc += np.bincount(flat, weights=np.log1p(-a[inside]), minlength=acc.size)
+                a_in = a[inside]
+                wsum += np.bincount(flat, weights=a_in, minlength=acc.size)
+                zk = np.broadcast_to(z[k, None, None], inside.shape)[inside]
+                zsum += np.bincount(flat, weights=a_in * zk, minlength=acc.size)
         log_clear = acc.reshape(ys.size, xs.size)
-        return (1.0 - np.exp(log_clear)).astype(np.float32)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            depth = np.where(wsum > 0, zsum / wsum, np.nan).reshape(ys.size, xs.size)
+        return (1.0 - np.exp(log_clear)).astype(np.float32), depth
 
 
 def foreground_of_click(index: SplatIndex, camera: Camera, click: FloatArray, depth_m: float,

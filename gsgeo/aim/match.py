@@ -82,6 +82,10 @@ BACK_MATCH_PX = 1.0
 MASK_REACH_PX = 2 * HALF_PX
 FULL_COVER = 0.97
 MIN_COVER_PX = 40.0
+#: Samples' weight per template pixel that counts as covering it whole (the shape's samples
+#: are at half-pixel steps: 4 a pixel where the target view keeps the reference's scale;
+#: 2 still covers a view that magnifies by 1.4).
+SHAPE_DENSITY = 2.0
 #: Iterations and step (px) at which the sub-pixel alignment stops.
 ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4)
 
@@ -107,7 +111,7 @@ class MatchResult:
     second: float | None = None
     depth_m: float | None = None
     reason: str | None = None
-    plane: FloatArray | None = None     # the normal of the plane whose warp matched best
+    plane: FloatArray | None = None     # the plane whose warp matched best; None: the shape
 
     def to_json(self) -> dict[str, object]:
         return {"ok": self.ok, "pixel": None if self.pixel is None else self.pixel.tolist(),
@@ -241,6 +245,95 @@ def reference_weights(ref: View, click: FloatArray, foreground: Foreground) -> n
     return out
 
 
+@dataclass(frozen=True)
+class Shape:
+    """The foreground about the click as 3-D samples: ``offsets`` (K, 3) from the click's
+    own surface point (rendered ECEF, metres), the reference image's grey ``values`` (K,)
+    and their ``weights`` (K,, the foreground's opacity) at half-pixel steps about the
+    click; a patch warped by it follows the splats' shape (a corner's faces, a pole's end)
+    instead of one plane's."""
+
+    offsets: FloatArray
+    values: np.ndarray
+    weights: np.ndarray
+
+
+def reference_shape(ref: View, click: FloatArray, foreground: Foreground) -> Shape | None:
+    """The foreground's samples about the click (:class:`Shape`) from its depth per sample
+    (gsgeo.aim.foreground's surface), half-pixel steps within MASK_REACH_PX; None when the
+    click's own sample has no depth."""
+    click = np.asarray(click, dtype=np.float64)
+    steps = np.arange(-2 * MASK_REACH_PX, 2 * MASK_REACH_PX + 1) / 2.0
+    xs, ys = click[0] + steps, click[1] + steps
+    op, z = foreground.surface(ref.camera, xs, ys)
+    c = steps.size // 2
+    z_click = z[c, c]
+    if not math.isfinite(z_click):
+        return None
+    gx, gy = np.meshgrid(xs, ys)
+    use = (op >= 0.5) & np.isfinite(z)
+    px = np.stack([gx[use], gy[use]], axis=1)
+    rays = ref.camera.pick_ray(px)
+    pts = ref.camera.position + (z[use] / (rays @ ref.camera.direction))[:, None] * rays
+    ray_c = ref.camera.pick_ray(click)[0]
+    at_click = ref.camera.position + z_click / float(ray_c @ ref.camera.direction) * ray_c
+    img = ref.image
+    sx = (px[:, 0] - ref.origin[0] - 0.5).astype(np.float32)
+    sy = (px[:, 1] - ref.origin[1] - 0.5).astype(np.float32)
+    values = cv2.remap(img, sx[None, :], sy[None, :], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)[0]
+    inside = values >= 0
+    return Shape(pts[inside] - at_click, values[inside].astype(np.float64),
+                 op[use][inside].astype(np.float64))
+
+
+def shape_patch(tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
+                ray: FloatArray, t: float, shape: Shape
+                ) -> tuple[np.ndarray, np.ndarray, float] | str:
+    """The reference patch as the target view would show it in the strip frame if the
+    click's surface point lay at depth ``t`` on the reference ray and the foreground about it
+    had the splats' shape: the samples of ``shape`` moved there, projected into the target
+    and splatted bilinearly into a 2 HALF_PX + 1 square about the click's projection; the
+    template, its weights (how much of each pixel the samples cover, 0..1) and the strip
+    column of its centre. A decline reason when the point does not project."""
+    h = HALF_PX
+    at = origin + t * ray
+    xy, _ = tgt.camera.project(np.vstack([at[None], at + shape.offsets]))
+    if not np.all(np.isfinite(xy[0])):
+        return "outside the view: the click does not map into the target view"
+    ok = np.all(np.isfinite(xy), axis=1)
+    ij = np.c_[xy - tgt.origin - 0.5, np.ones(len(xy))] @ strip_from_target.T
+    ij = ij[:, :2] / ij[:, 2:]
+    c = ij[0]
+    q = ij[1:] - c + h
+    ok = ok[1:] & (q[:, 0] > -1) & (q[:, 0] < 2 * h + 1) & (q[:, 1] > -1) & (q[:, 1] < 2 * h + 1)
+    q, val, w = q[ok], shape.values[ok], shape.weights[ok]
+    n = 2 * h + 1
+    acc_w = np.zeros(n * n)
+    acc_v = np.zeros(n * n)
+    base = np.floor(q).astype(np.int64)
+    frac = q - base
+    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        bx, by = base[:, 0] + dx, base[:, 1] + dy
+        k = (np.abs(1 - dx - frac[:, 0])) * (np.abs(1 - dy - frac[:, 1])) * w
+        inside = (bx >= 0) & (bx < n) & (by >= 0) & (by < n)
+        flat = by[inside] * n + bx[inside]
+        acc_w += np.bincount(flat, weights=k[inside], minlength=n * n)
+        acc_v += np.bincount(flat, weights=k[inside] * val[inside], minlength=n * n)
+    acc_w = acc_w.reshape(n, n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        templ = np.where(acc_w > 1e-6, acc_v.reshape(n, n) / acc_w, 0.0).astype(np.float32)
+    # half-pixel samples: about 4 per covered pixel when the view keeps the scale
+    tmask = np.clip(acc_w / SHAPE_DENSITY, 0.0, 1.0).astype(np.float32)
+    tmask[tmask < 0.25] = 0.0
+    if float(tmask.sum()) < MIN_COVER_PX:
+        return (f"weak: the feature covers {float(tmask.sum()):.0f} px of the patch around "
+                f"the click, below {MIN_COVER_PX:.0f}")
+    if weighted_std(templ, tmask) < MIN_TEXTURE:
+        return "weak: no texture around the click to match"
+    return templ, tmask, float(c[0])
+
+
 def warped_patch(ref: View, tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
                  ray: FloatArray, t: float, normal: FloatArray, click: FloatArray,
                  weights: np.ndarray | None = None
@@ -298,8 +391,9 @@ class Sweep:
 
 
 def sweep(ref: View, tgt: View, strip: np.ndarray, strip_from_target: np.ndarray,
-          origin: FloatArray, ray: FloatArray, normal: FloatArray, click: FloatArray,
-          depths: FloatArray, weights: np.ndarray | None = None) -> Sweep | str:
+          origin: FloatArray, ray: FloatArray, normal: FloatArray | None, click: FloatArray,
+          depths: FloatArray, weights: np.ndarray | None = None, shape: Shape | None = None
+          ) -> Sweep | str:
     """NCC along the strip of the patch warped for each depth on planes with ``normal``
     (each warp scores the columns nearest its depth's own); a reason when no warp maps (a
     depth whose plane maps the patch beyond the reference image, e.g. one very close to the
@@ -307,7 +401,11 @@ def sweep(ref: View, tgt: View, strip: np.ndarray, strip_from_target: np.ndarray
     h = HALF_PX
     templates, masks, columns, reasons = [], [], [], []
     for t in depths.tolist():
-        got = warped_patch(ref, tgt, strip_from_target, origin, ray, t, normal, click, weights)
+        got = (shape_patch(tgt, strip_from_target, origin, ray, t, shape)
+               if normal is None and shape is not None else
+               warped_patch(ref, tgt, strip_from_target, origin, ray, t,
+                            normal if normal is not None else -ref.camera.direction, click,
+                            weights))
         if isinstance(got, str):
             reasons.append(got)
             continue
@@ -461,11 +559,18 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     # orientation whose warp matches best is kept
     strip_from_target = np.linalg.inv(a)
     depths = depth_samples(near, far, depth)
-    planes = plane_normals(ref.camera, tgt.camera, o + depth * d, normal)
-    if only_normal and normal is not None:
-        planes = planes[:1]
-    tried = [(n, sweep(ref, tgt, strip, strip_from_target, o, d, n, click, depths, weights))
-             for n in planes]
+    planes: list[FloatArray | None] = list(
+        plane_normals(ref.camera, tgt.camera, o + depth * d, normal))
+    shape = None
+    if foreground is not None and foreground.count > 0:
+        shape = reference_shape(ref, click, foreground)
+        if shape is not None:
+            planes.append(None)                # the splats' own shape about the click
+    if only_normal:
+        planes = ([None] if shape is not None else planes[:1]) if normal is None \
+            else planes[:1]
+    tried = [(n, sweep(ref, tgt, strip, strip_from_target, o, d, n, click, depths, weights,
+                       shape)) for n in planes]
     found = [(n, sw) for n, sw in tried if isinstance(sw, Sweep)]
     if not found:
         return declined(next(sw for _, sw in tried if isinstance(sw, str)))
@@ -499,8 +604,11 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     coarse = p0 + (s_pk + ds) * u + (w_pk - b + dw) * v + tgt.origin + 0.5
     t_pk = closest_on_first(o, d, tgt.camera.position, tgt.camera.pick_ray(coarse)[0])
     if math.isfinite(t_pk) and t_pk > 0:
-        got = warped_patch(ref, tgt, strip_from_target, o, d, t_pk, normal_used, click,
-                           weights)
+        got = (shape_patch(tgt, strip_from_target, o, d, t_pk, shape)
+               if normal_used is None and shape is not None else
+               warped_patch(ref, tgt, strip_from_target, o, d, t_pk,
+                            normal_used if normal_used is not None else -ref.camera.direction,
+                            click, weights))
         templ, tmask = (templ, tmask) if isinstance(got, str) else (got[0], got[1])
     ds, dw = refine(templ, strip, rs, rw, ds, dw, tmask)
     s, w = s_pk + ds, w_pk - b + dw
