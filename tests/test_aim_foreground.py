@@ -113,7 +113,7 @@ def test_the_foreground_makes_a_corner_before_a_far_background_match():
     quarters of the patch is ground 4 m behind the corner, which target views 30-120 degrees
     round show shifted by a metre or more. The plain patch match does not find the corner
     (declined, or off it); weighted by the slab's splats about the click it lies within
-    0.4 px of the corner's projection in each view."""
+    0.5 px of the corner's projection in each view."""
     ground, slab = noise_texture(1, 1001), noise_texture(2, 151)
     corner = to_ecef([0.0, 0.0, SLAB])
     ref = look(45.0, 45.0, 10.0, [0, 0, SLAB])
@@ -131,5 +131,5 @@ def test_the_foreground_makes_a_corner_before_a_far_background_match():
         assert not (plain.ok and np.linalg.norm(plain.pixel - truth) < 1.0), (az, plain)
         weighted = match_feature(*args, foreground=fg)
         assert weighted.ok, (az, weighted.reason)
-        assert np.linalg.norm(weighted.pixel - truth) < 0.4, (az, weighted.pixel, truth)
+        assert np.linalg.norm(weighted.pixel - truth) < 0.5, (az, weighted.pixel, truth)
         assert abs(weighted.depth_m - t) < 0.02

@@ -38,8 +38,8 @@ MIN_ALPHA = 1.0 / 255.0
 MAX_ALPHA = 0.99
 #: A splat is evaluated on the pixels within this many standard deviations of its centre.
 STAMP_SIGMAS = 3.5
-#: Pixel x splat evaluations per chunk (bounds the memory used).
-CHUNK_PIXELS = 1 << 18
+#: Splats per chunk, composited front to back chunk by chunk.
+CHUNK_SPLATS = 64
 
 
 @dataclass(frozen=True)
@@ -94,7 +94,9 @@ class Foreground:
                 ) -> tuple[np.ndarray, np.ndarray]:
         """The foreground opacity (as :meth:`opacity`) and the depth of the foreground there
         (len(ys), len(xs)) float64: metres along the camera's axis, the mean of the splats'
-        centre depths weighted by their alpha at the pixel; NaN where no splat reaches."""
+        centre depths weighted by their share of the pixel (alpha times the transmittance of
+        the splats in front, composited front to back as the renderer does: what the view
+        shows, not the faces behind it); NaN where no splat reaches."""
         xs = np.asarray(xs, dtype=np.float64).reshape(-1)
         ys = np.asarray(ys, dtype=np.float64).reshape(-1)
         log_clear = np.zeros((ys.size, xs.size), dtype=np.float64)
@@ -133,33 +135,35 @@ class Foreground:
         u, v, c2, det, alpha, reach = u[ok], v[ok], c2[ok], det[ok], alpha[ok], reach[ok]
         z = z[ok]
         a00, a01, a11 = c2[:, 1, 1] / det, -c2[:, 0, 1] / det, c2[:, 0, 0] / det
-        half = np.minimum(2 ** np.ceil(np.log2(np.maximum(reach, 1.0))),
-                          max(xs.size, ys.size)).astype(np.int64)
-        acc = np.zeros(xs.size * ys.size, dtype=np.float64)
+        # stamp half sizes in samples (the grid may be finer than a pixel)
+        half = np.minimum(np.ceil(reach / min(sx, sy)), max(xs.size, ys.size)).astype(np.int64)
+        order = np.argsort(z, kind="stable")                   # front to back
+        acc = np.zeros(xs.size * ys.size, dtype=np.float64)    # log of the transmittance
         wsum = np.zeros(xs.size * ys.size, dtype=np.float64)
         zsum = np.zeros(xs.size * ys.size, dtype=np.float64)
-        for r in np.unique(half).tolist():
-            sel = np.flatnonzero(half == r)
+        for s in range(0, order.size, CHUNK_SPLATS):
+            k = order[s:s + CHUNK_SPLATS]
+            r = int(half[k].max())
             off = np.arange(-r, r + 1)
-            for s in range(0, sel.size, max(1, CHUNK_PIXELS // (2 * r + 1) ** 2)):
-                k = sel[s:s + max(1, CHUNK_PIXELS // (2 * r + 1) ** 2)]
-                ci = np.rint((u[k] - x0) / sx).astype(np.int64)
-                cj = np.rint((v[k] - y0) / sy).astype(np.int64)
-                ii = ci[:, None, None] + off[None, None, :]                # (n, 1, S)
-                jj = cj[:, None, None] + off[None, :, None]                # (n, S, 1)
-                dx = x0 + ii * sx - u[k, None, None]
-                dy = y0 + jj * sy - v[k, None, None]
-                q = a00[k, None, None] * dx * dx + 2.0 * a01[k, None, None] * dx * dy \
-                    + a11[k, None, None] * dy * dy
-                a = np.minimum(alpha[k, None, None] * np.exp(-0.5 * q), MAX_ALPHA)
-                inside = (ii >= 0) & (ii < xs.size) & (jj >= 0) & (jj < ys.size) \
-                    & (a >= MIN_ALPHA)
-                flat = np.broadcast_to(jj * xs.size + ii, inside.shape)[inside]
-                acc += np.bincount(flat, weights=np.log1p(-a[inside]), minlength=acc.size)
-                a_in = a[inside]
-                wsum += np.bincount(flat, weights=a_in, minlength=acc.size)
-                zk = np.broadcast_to(z[k, None, None], inside.shape)[inside]
-                zsum += np.bincount(flat, weights=a_in * zk, minlength=acc.size)
+            ci = np.rint((u[k] - x0) / sx).astype(np.int64)
+            cj = np.rint((v[k] - y0) / sy).astype(np.int64)
+            ii = ci[:, None, None] + off[None, None, :]                    # (n, 1, S)
+            jj = cj[:, None, None] + off[None, :, None]                    # (n, S, 1)
+            dx = x0 + ii * sx - u[k, None, None]
+            dy = y0 + jj * sy - v[k, None, None]
+            q = a00[k, None, None] * dx * dx + 2.0 * a01[k, None, None] * dx * dy \
+                + a11[k, None, None] * dy * dy
+            a = np.minimum(alpha[k, None, None] * np.exp(-0.5 * q), MAX_ALPHA)
+            inside = (ii >= 0) & (ii < xs.size) & (jj >= 0) & (jj < ys.size) & (a >= MIN_ALPHA)
+            flat = np.broadcast_to(jj * xs.size + ii, inside.shape)[inside]
+            a_in = a[inside]
+            # each splat's share of the pixel: its alpha times the transmittance of the
+            # chunks in front (within a chunk, a few centimetres deep, order is not kept)
+            share = a_in * np.exp(acc[flat])
+            wsum += np.bincount(flat, weights=share, minlength=acc.size)
+            zk = np.broadcast_to(z[k, None, None], inside.shape)[inside]
+            zsum += np.bincount(flat, weights=share * zk, minlength=acc.size)
+            acc += np.bincount(flat, weights=np.log1p(-a_in), minlength=acc.size)
         log_clear = acc.reshape(ys.size, xs.size)
         with np.errstate(invalid="ignore", divide="ignore"):
             depth = np.where(wsum > 0, zsum / wsum, np.nan).reshape(ys.size, xs.size)

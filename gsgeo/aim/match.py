@@ -86,6 +86,9 @@ MIN_COVER_PX = 40.0
 #: are at half-pixel steps: 4 a pixel where the target view keeps the reference's scale;
 #: 2 still covers a view that magnifies by 1.4).
 SHAPE_DENSITY = 2.0
+#: A shape sample is hidden in the target view when it lies farther than this many pixels'
+#: footprints behind the nearest sample at its pixel.
+SHAPE_DEPTH_PX = 4.0
 #: Iterations and step (px) at which the sub-pixel alignment stops.
 ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4)
 
@@ -298,7 +301,7 @@ def shape_patch(tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
     column of its centre. A decline reason when the point does not project."""
     h = HALF_PX
     at = origin + t * ray
-    xy, _ = tgt.camera.project(np.vstack([at[None], at + shape.offsets]))
+    xy, zt = tgt.camera.project(np.vstack([at[None], at + shape.offsets]))
     if not np.all(np.isfinite(xy[0])):
         return "outside the view: the click does not map into the target view"
     ok = np.all(np.isfinite(xy), axis=1)
@@ -307,8 +310,16 @@ def shape_patch(tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
     c = ij[0]
     q = ij[1:] - c + h
     ok = ok[1:] & (q[:, 0] > -1) & (q[:, 0] < 2 * h + 1) & (q[:, 1] > -1) & (q[:, 1] < 2 * h + 1)
-    q, val, w = q[ok], shape.values[ok], shape.weights[ok]
+    q, val, w, zt = q[ok], shape.values[ok], shape.weights[ok], zt[1:][ok]
     n = 2 * h + 1
+    # what the target sees: per template pixel only the samples near the nearest one (a
+    # face turned away from the target lies behind the others there)
+    near = np.clip(np.rint(q).astype(np.int64), 0, n - 1)
+    cell = near[:, 1] * n + near[:, 0]
+    front = np.full(n * n, np.inf)
+    np.minimum.at(front, cell, zt)
+    seen = zt <= front[cell] + SHAPE_DEPTH_PX * tgt.camera.ifov * zt
+    q, val, w = q[seen], val[seen], w[seen]
     acc_w = np.zeros(n * n)
     acc_v = np.zeros(n * n)
     base = np.floor(q).astype(np.int64)
