@@ -103,25 +103,33 @@ class PointRow:
     provenance: JSONObject = field(default_factory=dict)
 
 
-def result_rows(points: Iterable[PointRecord], now: str, dumps: Callable[[JSON], str]
-                ) -> Iterator[tuple[object, ...]]:
-    """What ``Transaction.update_results`` writes, one point at a time as ``points`` come
-    (a backend's executemany pulls them): (result, error, solved_rev, frame, updated_at,
-    project_id, id), texts made with ``dumps``. Each record's ``updated_at`` becomes ``now``
-    and its ``version`` goes up by one (a new result is a new version of the point); a
-    frame record shared by many points is encoded once."""
-    frames: dict[int, tuple[JSON, str]] = {}  # id(frame) -> (frame, its text)
+def result_values(points: Iterable[PointRecord], now: str
+                  ) -> Iterator[tuple[JSON, str | None, int, JSON, str, str]]:
+    """What ``Transaction.update_results`` writes, one point at a time as ``points`` come:
+    (result, error, solved_rev, frame, project_id, id) with the result and frame as JSON
+    values (None where absent). Each record's ``updated_at`` becomes ``now`` and its
+    ``version`` goes up by one (a new result is a new version of the point)."""
     for p in points:
         p.updated_at = now
         p.version += 1
-        frame = None
-        if p.frame is not None:
-            got = frames.get(id(p.frame))
-            if got is None or got[0] is not p.frame:
-                got = frames[id(p.frame)] = (p.frame, dumps(p.frame))
-            frame = got[1]
-        yield (None if p.result is None else dumps(p.result), p.error, p.solved_rev, frame,
-               now, p.project_id, p.id)
+        yield p.result, p.error, p.solved_rev, p.frame, p.project_id, p.id
+
+
+def result_rows(points: Iterable[PointRecord], now: str, dumps: Callable[[JSON], str]
+                ) -> Iterator[tuple[object, ...]]:
+    """:func:`result_values` as a backend's executemany pulls them: (result, error,
+    solved_rev, frame, updated_at, project_id, id), texts made with ``dumps``; a frame record
+    shared by many points is encoded once."""
+    frames: dict[int, tuple[JSON, str]] = {}  # id(frame) -> (frame, its text)
+    for result, error, solved_rev, frame, pid, point_id in result_values(points, now):
+        text = None
+        if frame is not None:
+            got = frames.get(id(frame))
+            if got is None or got[0] is not frame:
+                got = frames[id(frame)] = (frame, dumps(frame))
+            text = got[1]
+        yield (None if result is None else dumps(result), error, solved_rev, text,
+               now, pid, point_id)
 
 
 class Transaction(ABC):

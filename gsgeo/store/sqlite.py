@@ -22,7 +22,7 @@ from gsgeo.errors import GsgeoError
 from gsgeo.jsontypes import JSON
 from gsgeo.pointschema import RECORD_KEYS
 from gsgeo.store.accountrecords import AuditEntry, UserRecord
-from gsgeo.store.base import PointFilter, PointRow, Store, Transaction, instant, result_rows
+from gsgeo.store.base import PointFilter, PointRow, Store, Transaction, instant
 from gsgeo.store.migrations import MIGRATIONS, SCHEMA_VERSION
 from gsgeo.store.records import (
     BuildingRecord,
@@ -33,6 +33,7 @@ from gsgeo.store.records import (
     PreconditionFailed,
     Project,
 )
+from gsgeo.store.sqlitebulk import write_results
 
 #: File name of the store inside the data directory.
 DB_NAME = "gsgeo.sqlite"
@@ -283,10 +284,9 @@ class SQLiteTransaction(Transaction):
         p.version += 1
 
     def update_results(self, points: Iterable[PointRecord]) -> None:
-        self.con.executemany(
-            "UPDATE points SET result=?, error=?, solved_rev=?, frame=?, updated_at=?,"
-            " version=version+1 WHERE project_id=? AND id=?",
-            result_rows(points, now_iso(), _dumps))
+        """In chunks, written on a second thread while the next are made
+        (gsgeo.store.sqlitebulk)."""
+        write_results(self.con, points, now_iso(), _dumps)
 
     def delete_point(self, pid: str, point_id: str) -> bool:
         cur = self.con.execute("DELETE FROM points WHERE project_id = ? AND id = ?", (pid, point_id))
