@@ -12,7 +12,9 @@ from gsgeo.errors import InputError
 #: How to measure a marker, in the README's words.
 MEASURE_HINT = ("measure      press M, click a marker in 3-5 views from different directions, "
                 "press Enter and give the point the marker's id (G1-G4, R1, B1-B6, T1-T5, "
-                "S1-S4): the accuracy panel shows dE, dN, dH and the RMSE against the truth")
+                "S1-S4): the accuracy panel shows dE, dN, dH and the RMSE against the truth; "
+                "V flies to a suggested view, A (after the first click) finds the marker in "
+                "suggested views by itself")
 
 
 def local_hint(data: Path) -> str:
