@@ -73,8 +73,9 @@ MAX_TEMPLATES = 16
 #: plane orientations closer than this (cosine) count as one.
 EDGE_ON = 0.2
 SAME_PLANE = 0.985
-#: Matching back from the target view must land this close to the click (px).
-BACK_MATCH_PX = 1.0
+#: Matching back from the target view must land this close to the click (px): two matches'
+#: sub-pixel errors (0.5-1 px each for a corner's or a pole's shape warp) add up.
+BACK_MATCH_PX = 1.5
 #: With the splats known (a Foreground), the reference patch's pixels are weighted by the
 #: foreground's opacity, computed this far (px) about the click; a patch whose weight is
 #: FULL_COVER or more of its pixels is matched whole (a surface: nothing to leave out), one
