@@ -133,3 +133,74 @@ def test_the_foreground_makes_a_corner_before_a_far_background_match():
         assert weighted.ok, (az, weighted.reason)
         assert np.linalg.norm(weighted.pixel - truth) < 0.5, (az, weighted.pixel, truth)
         assert abs(weighted.depth_m - t) < 0.02
+
+
+# --- a box's corner: three faces about the click -------------------------------------------
+
+BOX = 1.5           # the box reaches BOX west and south of its corner, and down to the ground
+
+
+def face_splats(corner, a, b, n_a, n_b, normal, step: float = 0.02):
+    """Flat splats tiling the parallelogram corner + [0, 1] a + [0, 1] b (local metres)."""
+    from gsgeo.tiles.splats import matrix_to_quat
+
+    ua, ub = np.linspace(0, 1, n_a), np.linspace(0, 1, n_b)
+    ga, gb = np.meshgrid(ua, ub)
+    local = np.asarray(corner) + ga.reshape(-1, 1) * np.asarray(a) + gb.reshape(-1, 1) * \
+        np.asarray(b)
+    axes = np.stack([EAST, NORTH, UP], axis=1)
+    t1 = axes @ (np.asarray(a) / np.linalg.norm(a))
+    nn = axes @ np.asarray(normal, dtype=float)
+    rot = np.stack([t1, np.cross(nn, t1), nn], axis=1)
+    k = len(local)
+    return (to_ecef(local), np.tile([step * 0.6, step * 0.6, 0.001], (k, 1)),
+            np.tile(matrix_to_quat(rot), (k, 1)), np.full(k, 0.99))
+
+
+def box_faces():
+    """(corner, a, b, normal) of the roof, the east and the north face (local metres)."""
+    return [([-BOX, 0.0, SLAB], [BOX, 0, 0], [0, -BOX, 0], [0, 0, 1.0]),
+            ([0.0, 0.0, SLAB], [0, -BOX, 0], [0, 0, -SLAB], [1.0, 0, 0]),
+            ([-BOX, 0.0, SLAB], [BOX, 0, 0], [0, 0, -SLAB], [0, 1.0, 0])]
+
+
+def render_box(cam: Camera, ground: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
+    g, _ = render_plane(cam, ground, [-5.0, 5.0, 0.0], [TEXEL_M, 0, 0], [0, -TEXEL_M, 0])
+    out, covered = np.zeros_like(g), np.zeros_like(g)
+    for tex, (corner, a, b, _) in zip(faces, box_faces(), strict=True):
+        n = tex.shape[0] - 1
+        img, cov = render_plane(cam, tex, corner, np.asarray(a) / n, np.asarray(b) / n)
+        out += img * cov
+        covered += cov
+    return (out + g * np.clip(1.0 - covered, 0.0, 1.0)).astype(np.float32)
+
+
+def test_the_splats_shape_warps_a_box_corner():
+    """The top corner of a box (roof and two walls meeting there) clicked from 45 degrees up,
+    outside the corner: in views 20-35 degrees round, each face turns differently, which no
+    single plane's warp follows: the plain match declines (NCC 0.46-0.64). The patch warped
+    by the splats' own shape (their depth per sample) finds the corner within 0.75 px, and it
+    is the hypothesis kept. (About 0.5 px of it is a bias along the line: the mean depth of
+    the splats covering the corner's pixel lies on its faces, a little behind the corner.)"""
+    ground = noise_texture(1, 1001)
+    faces = [noise_texture(s, 151) for s in (4, 5, 6)]
+    parts = [face_splats(c, a, b, 76, 76 if k == 0 else 151, nrm)
+             for k, (c, a, b, nrm) in enumerate(box_faces())]
+    index = SplatIndex.from_arrays(*(np.concatenate([p[i] for p in parts]) for i in range(4)))
+    corner = to_ecef([0.0, 0.0, SLAB])
+    ref = look(45.0, 45.0, 10.0, [0, 0, SLAB])
+    ref_img = render_box(ref, ground, faces)
+    click = ref.project(corner[None])[0][0]
+    t = float(np.linalg.norm(corner - ref.position))
+    fg = foreground_of_click(index, ref, click, t)
+    for az, el in ((15.0, 35.0), (75.0, 35.0), (45.0, 70.0), (45.0, 20.0)):
+        tgt = look(az, el, 10.0, [0, 0, SLAB])
+        truth = tgt.project(corner[None])[0][0]
+        args = (View(ref_img, np.zeros(2), ref), click,
+                View(render_box(tgt, ground, faces), np.zeros(2), tgt), t - 0.3, t + 0.3, t)
+        plain = match_feature(*args)
+        assert not (plain.ok and np.linalg.norm(plain.pixel - truth) < 1.0), (az, el, plain)
+        res = match_feature(*args, foreground=fg)
+        assert res.ok, (az, el, res.reason)
+        assert np.linalg.norm(res.pixel - truth) < 0.75, (az, el, res.pixel, truth)
+        assert res.plane is None, (az, el, res.plane)            # the shape's warp
