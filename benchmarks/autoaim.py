@@ -54,7 +54,9 @@ def store(page, t) -> dict:
     page.wait_for_function("gsgeo.state.measure.solution !== null || gsgeo.state.measure.error !== null",
                            timeout=120_000)
     page.keyboard.press("Enter")
-    page.wait_for_selector("#id-prompt:not([hidden])")
+    t0 = time.perf_counter()
+    page.wait_for_selector("#id-prompt:not([hidden])", timeout=120_000)
+    print(f"{t.id}: the ID prompt {time.perf_counter() - t0:.1f} s after Enter", flush=True)
     page.fill("#id-prompt-input", t.id)
     with page.expect_response(lambda r: r.url.endswith("/points") and r.request.method == "POST") as resp:
         page.keyboard.press("Enter")
@@ -64,6 +66,18 @@ def store(page, t) -> dict:
 
 def error_of(pt: dict, t) -> float:
     return float(np.linalg.norm(np.asarray(pt["result"]["point_ecef"]) - np.asarray(t.ecef)))
+
+
+def summary(r: dict) -> str:
+    """One line of auto-aim's instants (s from A) and outcome."""
+    tm = r["timings"]
+    views = " ".join(f"v{v['view']} drawn {v['drawn'] / 1000:.1f} s ({v['frames']} frames"
+                     + (f", {v['splats']} splats" if "splats" in v else "")
+                     + f") matched {v.get('matched', 0) / 1000:.1f} s" for v in tm.get("views", []))
+    sec = {k: tm.get(k, float("nan")) / 1000 for k in ("rays", "depth", "reference", "suggested")}
+    return (f"A -> rays {sec['rays']:.1f} s (wall {r['wall_s']:.1f} s); depth {sec['depth']:.2f} s, "
+            f"reference {sec['reference']:.1f} s, views {sec['suggested']:.1f} s; {views}; "
+            f"{tm['added']} auto rays")
 
 
 def auto_point(page, t) -> dict:
@@ -78,6 +92,7 @@ def auto_point(page, t) -> dict:
     wall = time.perf_counter() - t0
     last = page.evaluate("gsgeo.autoaim.last")
     out = {"id": t.id, "wall_s": wall, "timings": last, "clicks": 1}
+    print(f"{t.id}: {summary(out)}", flush=True)
     if last["added"] >= 2:
         out["error_m"] = error_of(store(page, t), t)
     else:
@@ -109,6 +124,7 @@ def main() -> None:
     ap.add_argument("--manual", action="store_true", help="also measure each marker by three clicks")
     ap.add_argument("--manual-only", action="store_true", help="only the three-click measurements")
     ap.add_argument("--out", type=Path, help="write the results as JSON")
+    ap.add_argument("--web", type=Path, help="serve the viewer from this web/ directory (A/B runs)")
     args = ap.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -120,27 +136,22 @@ def main() -> None:
     truth = {t.id: t for t in place.truth_points()}
     ids = args.markers.split(",") if args.markers else list(truth)
     print(f"{platform.node()} {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; markers {','.join(ids)}")
-    proc, base = start_server(data)
+    proc, base = start_server(data, *(["--web", str(args.web)] if args.web else []))
     auto: list[dict] = []
     manual: list[dict] = []
     try:
         with sync_playwright() as pw:
             b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
             page = b.new_page(viewport=VIEWPORT)
+            page.on("pageerror", lambda exc: print(f"page error: {exc}", flush=True))
             page.goto(f"{base}/?scene=demo&project={PROJECT_ID}")
             page.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=120_000)
             page.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
                                    timeout=300_000)
             for pid in [] if args.manual_only else ids:
                 r = auto_point(page, truth[pid])
-                tm = r["timings"]
-                views = " ".join(f"v{v['view']} drawn {v['drawn'] / 1000:.1f} s ({v['frames']} frames) "
-                                 f"matched {v.get('matched', 0) / 1000:.1f} s" for v in tm.get("views", []))
-                err = f"{1000 * r['error_m']:.1f} mm" if "error_m" in r else "not stored"
-                sec = {k: tm.get(k, float("nan")) / 1000 for k in ("rays", "depth", "reference", "suggested")}
-                print(f"{pid}: A -> rays {sec['rays']:.1f} s (wall {r['wall_s']:.1f} s); "
-                      f"depth {sec['depth']:.2f} s, reference {sec['reference']:.1f} s, "
-                      f"views {sec['suggested']:.1f} s; {views}; {tm['added']} auto rays; {err}", flush=True)
+                err = f"{1000 * r['error_m']:.1f} mm from the truth" if "error_m" in r else "not stored"
+                print(f"{pid}: {err}", flush=True)
                 auto.append(r)
             if args.manual or args.manual_only:
                 # the auto points hold the markers' ids: the manual ones go to a second project

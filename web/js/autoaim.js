@@ -21,6 +21,7 @@ import { fixed, h } from "./format.js";
 import { currentCamera, project, requestDepth } from "./guide.js";
 import { add, norm, scale } from "./linalg.js";
 import { captureRay } from "./rays.js";
+import { holdSplats, splatsHoldable } from "./render.js";
 
 const Cesium = window.Cesium;
 
@@ -139,8 +140,13 @@ function hideExtras(ctx) {
  *  Speed: every frame draws all the splats, seconds each in a software renderer. Until the
  *  splats are sorted for the new camera (in a worker, over several frames) the frames would
  *  draw the old order, which is of no use here: the splat draw command of the old order is
- *  muted (instanceCount 0) meanwhile, so that only the one frame that is captured draws them. */
+ *  muted (instanceCount 0) meanwhile, so that only the one frame that is captured draws them.
+ *  Where the splats can be drawn by parts (a scene whose snapshot holds all its tiles, as
+ *  the demo's one tile) captureHeld does it in one frame of the crops' splats instead, also
+ *  from the first frame in which that becomes possible (the scene's first snapshot built). */
 function captureAt(ctx, camera, boxes) {
+  const hold = holdSplats(ctx.state.tileset);
+  if (hold) return captureHeld(ctx, hold, camera, boxes);
   const { viewer } = ctx;
   const scene = viewer.scene;
   setCamera(viewer, camera);
@@ -170,6 +176,12 @@ function captureAt(ctx, camera, boxes) {
     // and draws it from the next)
     const onPre = () => {
       const tt = ctx.state.tileset;
+      if (splatsHoldable(tt)) {
+        // the splats became drawable by parts (their first snapshot is in): this frame
+        // draws only those of the crops instead
+        done(() => resolve(captureHeld(ctx, holdSplats(tt), camera, boxes)));
+        return;
+      }
       const q = tt && tt.gaussianSplatPrimitive;
       ready = sortedFor(tt, viewer.camera) && !(muted && q && q._drawCommand === muted.command);
     };
@@ -187,6 +199,54 @@ function captureAt(ctx, camera, boxes) {
     };
     const timer = setTimeout(() => done(() => reject(new Error("the view was not drawn in time"))), VIEW_TIMEOUT_MS);
     scene.preRender.addEventListener(onPre);
+    scene.postRender.addEventListener(onPost);
+    scene.requestRender();
+  });
+}
+
+/** captureAt when the splats can be drawn by parts (render.js's holdSplats, `hold`): one
+ *  frame at `camera` that draws only the splats reaching the crops, sorted for it here (no
+ *  wait for Cesium's sort of all the splats); the crops are those of a full frame. */
+function captureHeld(ctx, hold, camera, boxes) {
+  const { viewer } = ctx;
+  const scene = viewer.scene;
+  setCamera(viewer, camera);
+  const restore = hideExtras(ctx);
+  const canvas = scene.canvas;
+  let splats = 0;
+  try {
+    const bs = boxes();
+    const x0 = Math.min(...bs.map((b) => b[0]));
+    const y0 = Math.min(...bs.map((b) => b[1]));
+    const x1 = Math.max(...bs.map((b) => b[0] + b[2]));
+    const y1 = Math.max(...bs.map((b) => b[1] + b[3]));
+    splats = hold.arm(viewer.camera, [x0, y0, x1 - x0, y1 - y0], canvas.clientWidth, canvas.clientHeight);
+  } catch (exc) {
+    restore();
+    hold.release(viewer.camera);
+    return Promise.reject(exc);
+  }
+  return new Promise((resolve, reject) => {
+    let frames = 0;
+    const done = (fn) => {
+      scene.postRender.removeEventListener(onPost);
+      clearTimeout(timer);
+      hold.disarm();
+      restore();
+      hold.release(viewer.camera);
+      fn();
+    };
+    const onPost = () => {
+      frames++;
+      if (hold.drawnFrame >= 0) {
+        let crops;
+        try { crops = boxes().map((b) => cropOf(canvas, b)); } catch (exc) { done(() => reject(exc)); return; }
+        done(() => resolve({ crops, frames, splats }));
+        return;
+      }
+      scene.requestRender();
+    };
+    const timer = setTimeout(() => done(() => reject(new Error("the view was not drawn in time"))), VIEW_TIMEOUT_MS);
     scene.postRender.addEventListener(onPost);
     scene.requestRender();
   });
@@ -298,6 +358,7 @@ export async function autoAim(ctx, changed = () => {}) {
   const home = currentCamera(viewer);
   let moved = false;
   let restore = null;
+  let held = null;
   try {
     say("Auto-aim: finding the feature of ray 1 in other views…");
     const scene = encodeURIComponent(state.sceneName);
@@ -325,6 +386,8 @@ export async function autoAim(ctx, changed = () => {}) {
     const far = add(ray1.origin, scale(d, depth.far_m));
     const matches = [];
     restore = hideExtras(ctx);
+    // the splats stay held across the views: no sort of all of them, no full frame between
+    held = holdSplats(state.tileset);
     for (let i = 0; i < views.length; i++) {
       if (state.measure !== m) return;
       const v = views[i];
@@ -335,7 +398,7 @@ export async function autoAim(ctx, changed = () => {}) {
       say(`Auto-aim: rendering ${viewName(v, i)} of ${views.length}…`);
       moved = true;
       const shot = await captureAt(ctx, vc, () => [box]);
-      const tv = { view: i + 1, drawn: at(), frames: shot.frames };
+      const tv = { view: i + 1, drawn: at(), frames: shot.frames, ...(shot.splats ? { splats: shot.splats } : {}) };
       timings.views.push(tv);
       const crop = shot.crops[0];
       const target = { image: crop.toDataURL("image/png"), origin: [box[0], box[1]], camera: vc };
@@ -372,6 +435,7 @@ export async function autoAim(ctx, changed = () => {}) {
     running = null;
     if (restore) restore();
     if (moved && home) setCamera(viewer, home);
+    if (held) held.release(viewer.camera);
     viewer.scene.requestRender();
     window.gsgeo.autoaim = { last: { ...timings, added: result.added, declined: declined.map((x) => x.reason), text: result.text }, images };
     if (state.measure === m) changed(result.added > 0);

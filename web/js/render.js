@@ -9,23 +9,24 @@
 /** Frames rendered after an explicit request: entities (labels, points) may take one or two
  *  frames to appear after they are added. */
 const SETTLE_FRAMES = 3;
-/** Frames rendered after the camera stops: the splats are sorted again for the new pose once
- *  three frames have passed since the last sort (CesiumJS 1.145); the sort itself then keeps
- *  frames coming (splatsBusy). */
-const CAMERA_SETTLE_FRAMES = 6;
+/** Frames rendered after the camera stops. Each frame draws every splat (seconds in a
+ *  software renderer): the splats' sort for the new pose is asked by RenderOnDemand itself
+ *  (askSortFor) and keeps frames coming while it runs (splatsBusy), so one is enough. */
+const CAMERA_SETTLE_FRAMES = 1;
 
 /** Whether tileset `t`'s Gaussian splats still need frames: tiles loading, a snapshot being
- *  built or a sort under way. CesiumJS 1.145 (pinned) has no
+ *  built or a sort under way (not while they are held: holdSplats). CesiumJS 1.145 (pinned) has no
  *  public signal for this: it reads the splat primitive's state (revisit on a Cesium upgrade). */
 export function splatsBusy(t) {
-  if (!t || !t.show) return false;
+  if (!t || !t.show || splatsHeld(t)) return false;
   if (!t.tilesLoaded) return true;
   const p = t.gaussianSplatPrimitive;
   if (!p) return false;
   if (t.statistics.numberOfPointsSelected > 0 && p._numSplats !== t.statistics.numberOfPointsSelected) return true;
   if (p._pendingSnapshot || p._needsSnapshotRebuild || p._dirty || p._pendingSortPromise || p._sorterPromise) return true;
   if (p._sorterState !== undefined && p._sorterState !== 0) return true; // 0: IDLE
-  return !p._drawCommand && p._numSplats > 0;
+  // no command yet, or one muted by SplatHold.release until the next sort
+  return p._numSplats > 0 && (!p._drawCommand || p._drawCommand.instanceCount === 0);
 }
 
 /** Whether tileset `t` shows its scene: every tile loaded and, for Gaussian splats, every
@@ -49,14 +50,21 @@ export class RenderOnDemand {
     scene.requestRenderMode = true;
     // nothing in the scene depends on simulation time
     scene.maximumRenderTimeChange = Number.POSITIVE_INFINITY;
+    this.moving = false;
     scene.postRender.addEventListener(() => { this.frames++; });
-    viewer.camera.moveEnd.addEventListener(() => this.request(CAMERA_SETTLE_FRAMES));
+    viewer.camera.moveStart.addEventListener(() => { this.moving = true; });
+    viewer.camera.moveEnd.addEventListener(() => {
+      this.moving = false;
+      this.request(CAMERA_SETTLE_FRAMES);
+    });
     // runs on every animation tick, rendered or not: ask for the next frame while needed
     scene.postUpdate.addEventListener(() => {
       if (this.pending > 0) {
         this.pending--;
         scene.requestRender();
       } else if (this.busy()) {
+        scene.requestRender();
+      } else if (!this.moving && askSortFor(this.tileset(), viewer.camera)) {
         scene.requestRender();
       }
     });
@@ -72,4 +80,215 @@ export class RenderOnDemand {
     this.pending = Math.max(this.pending, frames);
     this.viewer.scene.requestRender();
   }
+}
+
+// ---------------------------------------------------------------------------------------
+// Drawing only the splats that reach part of the window (auto-aim's crops)
+
+/** Splats whose centre is this many standard deviations (their largest scale) from a box
+ *  may still reach it: Cesium's splat quad reaches 2 sigma (CesiumJS 1.145's shaders). */
+const REACH_SIGMAS = 3;
+/** Pixels added to each splat's reach (Cesium's 0.3 px² low-pass and rounding). */
+const REACH_PX = 2;
+
+const holds = new WeakMap(); // Gaussian splat primitive -> its SplatHold
+const radii = new WeakMap(); // a snapshot's scales array -> Float32Array of reach radii (m)
+
+/** Whether the committed splat snapshot of tileset `t` holds every tile of the tileset with
+ *  content, so that no camera can select a splat it lacks (one-tile scenes, or all loaded). */
+function snapshotHoldsAll(t, p) {
+  const set = p._selectedTileSet;
+  if (!set || !t.root) return false;
+  const stack = [t.root];
+  while (stack.length) {
+    const tile = stack.pop();
+    if (tile.hasRenderableContent && !set.has(tile)) return false;
+    for (const c of tile.children) stack.push(c);
+  }
+  return true;
+}
+
+/**
+ * While held, the Gaussian splats of a tileset are drawn only when asked, and then only those
+ * whose footprint can reach a given window box, in back-to-front order for the camera of
+ * that frame. The pixels inside the box are those of a full frame (the splats left out
+ * cannot reach it, the order of the rest is the full order restricted to them), at a
+ * fraction of the cost: the splats' vertex work is the larger part of a software frame.
+ *
+ * CesiumJS 1.145 (pinned) has no public way to draw a subset: the hold replaces the splat
+ * primitive's per-frame update on that one object (so Cesium's own sorting and rebuilds wait),
+ * writes the subset's indexes into its instance buffer and sets the draw command's instance
+ * count; release() writes Cesium's own sorted indexes back and restores both. Revisit on a
+ * Cesium upgrade (it reads _positions, _scales, _indexes, _drawCommand, _vertexArray).
+ */
+class SplatHold {
+  constructor(t, p) {
+    this.t = t;
+    this.p = p;
+    this.users = 1;
+    this.command = p._drawCommand;
+    this.count = this.command.instanceCount;
+    this.armed = false;
+    this.drawnFrame = -1;
+    this.ownUpdate = Object.prototype.hasOwnProperty.call(p, "update") ? p.update : undefined;
+    const hold = this;
+    p.update = function heldUpdate(frameState) {
+      if (!hold.t.show || !hold.armed || !frameState.passes.render) return;
+      frameState.commandList.push(hold.command);
+      hold.drawnFrame = frameState.frameNumber;
+    };
+  }
+
+  /** Reach radius (m) of every splat of the snapshot: REACH_SIGMAS x its largest scale. */
+  radii() {
+    const s = this.p._scales;
+    let r = radii.get(s);
+    if (!r) {
+      const n = this.p._numSplats;
+      r = new Float32Array(n);
+      for (let i = 0; i < n; i++) {
+        r[i] = REACH_SIGMAS * Math.max(s[3 * i], s[3 * i + 1], s[3 * i + 2]);
+      }
+      radii.set(s, r);
+    }
+    return r;
+  }
+
+  /**
+   * Arm the next frame to draw the splats that can reach window box `box` = [x0, y0, w, h]
+   * (CSS px) of Cesium camera `camera` (perspective, the one the frame will use) on a window
+   * of `width` x `height` CSS px; returns how many splats that is.
+   */
+  arm(camera, box, width, height) {
+    const p = this.p;
+    const Cesium = window.Cesium;
+    const mv = Cesium.Matrix4.multiply(camera.viewMatrix, p._rootTransform, new Cesium.Matrix4());
+    const f = height / (2 * Math.tan(camera.frustum.fovy / 2));
+    const cx = width / 2;
+    const cy = height / 2;
+    const [bx0, by0, bw, bh] = box;
+    const bx1 = bx0 + bw;
+    const by1 = by0 + bh;
+    const pos = p._positions;
+    const rad = this.radii();
+    const n = p._numSplats;
+    const keep = new Uint32Array(n);
+    const depth = new Float32Array(n);
+    let m = 0;
+    for (let i = 0; i < n; i++) {
+      const x = pos[3 * i];
+      const y = pos[3 * i + 1];
+      const z = pos[3 * i + 2];
+      // view coordinates: the camera looks along -z
+      const vz = mv[2] * x + mv[6] * y + mv[10] * z + mv[14];
+      const w = -vz;
+      const r = rad[i];
+      if (w > r) {
+        const vx = mv[0] * x + mv[4] * y + mv[8] * z + mv[12];
+        const vy = mv[1] * x + mv[5] * y + mv[9] * z + mv[13];
+        const u = cx + (f * vx) / w;
+        const v = cy - (f * vy) / w;
+        const reach = (f * r) / w + REACH_PX;
+        if (u + reach < bx0 || u - reach > bx1 || v + reach < by0 || v - reach > by1) continue;
+      } // else: at or behind the camera's plane, left to Cesium's shader as in a full frame
+      keep[m] = i;
+      depth[m] = vz;
+      m++;
+    }
+    // back to front: the farthest (most negative view z) first, as Cesium's sort orders them
+    const order = new Uint32Array(m);
+    for (let k = 0; k < m; k++) order[k] = k;
+    order.sort((a, b) => depth[a] - depth[b]);
+    const out = new Uint32Array(m);
+    for (let k = 0; k < m; k++) out[k] = keep[order[k]];
+    p._vertexArray.getAttribute(1).vertexBuffer.copyFromArrayView(out);
+    this.command.instanceCount = m;
+    this.armed = true;
+    this.drawnFrame = -1;
+    return m;
+  }
+
+  /** Nothing of the splats is drawn from the next frame on (until armed again). */
+  disarm() {
+    this.armed = false;
+  }
+
+  /** Give the primitive back to Cesium (its own sorted indexes, count and update), the
+   *  viewer's camera `camera` being where it will be drawn next. When Cesium's last sort is
+   *  not for that camera, its draw command stays muted (nothing of the splats drawn) until
+   *  Cesium has sorted them for it and built the next command, and that sort is asked now:
+   *  so no frame draws every splat in a stale order (a full frame costs seconds). */
+  release(camera) {
+    if (--this.users > 0) return;
+    const p = this.p;
+    holds.delete(p);
+    if (this.ownUpdate) p.update = this.ownUpdate;
+    else delete p.update;
+    if (p._indexes && p._vertexArray && p._indexes.length <= p._vertexArrayLen) {
+      p._vertexArray.getAttribute(1).vertexBuffer.copyFromArrayView(p._indexes);
+    }
+    const idle = p._sorterState === 0 && !p._sorterPromise; // 0: IDLE
+    if (camera && p._drawCommand === this.command && !(idle && sortedForCamera(p, camera))) {
+      this.command.instanceCount = 0;
+      askSortFor(this.t, camera);
+    } else {
+      this.command.instanceCount = this.count;
+    }
+  }
+}
+
+/** Whether splat primitive `p`'s last sort was made for Cesium camera `camera`, within
+ *  Cesium's own re-sort thresholds (1 m, 0.5 degree). */
+function sortedForCamera(p, camera) {
+  if (!p._hasLastSteadySortCameraPosition || !p._hasLastSteadySortCameraDirection) return false;
+  const C = window.Cesium;
+  return C.Cartesian3.distance(camera.positionWC, p._lastSteadySortCameraPosition) < 1.0
+    && C.Cartesian3.angleBetween(camera.directionWC, p._lastSteadySortCameraDirection) < 0.0087;
+}
+
+/** When the splats of tileset `t` were last sorted for another pose than Cesium camera
+ *  `camera`'s and no sort or rebuild is under way, make the next frame sort them for it and
+ *  return true. CesiumJS 1.145 re-sorts on a camera change only when its last sort was at
+ *  least 3 frames before, and otherwise waits for the next change: a camera that stops within
+ *  3 frames of a sort would keep the old order. */
+export function askSortFor(t, camera) {
+  const p = t && t.show && t.gaussianSplatPrimitive;
+  if (!p || holds.has(p) || !p._drawCommand || !(p._numSplats > 0) || !p._prevViewMatrix) return false;
+  if (p._sorterState !== 0 || p._sorterPromise || p._pendingSnapshot || p._pendingSortPromise) return false;
+  if (sortedForCamera(p, camera)) return false;
+  p._lastSteadySortFrameNumber = -1;
+  window.Cesium.Matrix4.clone(window.Cesium.Matrix4.ZERO, p._prevViewMatrix);
+  return true;
+}
+
+/** Hold the splats of tileset `t` (see SplatHold): the hold, or null when its splats cannot be
+ *  drawn by parts now (not a Gaussian splat tileset, a snapshot not yet built or not holding
+ *  every tile, a sort of new tiles under way). Nested holds share one; each one is
+ *  released. */
+export function holdSplats(t) {
+  if (!splatsHoldable(t)) return null;
+  const p = t.gaussianSplatPrimitive;
+  const h = holds.get(p);
+  if (h) { h.users++; return h; }
+  const hold = new SplatHold(t, p);
+  holds.set(p, hold);
+  return hold;
+}
+
+/** Whether holdSplats(t) would give a hold now (or one is held). */
+export function splatsHoldable(t) {
+  const p = t && t.gaussianSplatPrimitive;
+  if (!p || !t.tilesLoaded) return false;
+  if (holds.has(p)) return true;
+  if (!p._drawCommand || !p._vertexArray || !p._positions || !p._scales || !p._rootTransform) return false;
+  if (p._pendingSnapshot || p._needsSnapshotRebuild || p._dirty) return false;
+  const n = p._numSplats;
+  if (!(n > 0) || p._positions.length < 3 * n || p._scales.length < 3 * n || p._vertexArrayLen < n) return false;
+  return snapshotHoldsAll(t, p);
+}
+
+/** Whether tileset `t`'s splats are held (drawn only when asked). */
+export function splatsHeld(t) {
+  const p = t && t.gaussianSplatPrimitive;
+  return !!p && holds.has(p);
 }
