@@ -2,7 +2,8 @@
 the truth: a dataset captured once, then evaluated offline (fast) as the matcher changes.
 
     python benchmarks/automatch.py capture [--data DIR] [--dataset DIR] [--markers G1,B1,...]
-    python benchmarks/automatch.py evaluate [--dataset DIR] [--normal] [-v]
+                                           [--shape-views]
+    python benchmarks/automatch.py evaluate [--dataset DIR] [--normal] [--foreground] [-v]
 
 capture: `gsgeo demo` into --data (kept), `gsgeo serve`, and for each marker the viewer's own
 auto-aim (web/js/autoaim.js: M, one real click on the marker's exact projection from 45
@@ -17,7 +18,10 @@ matched pixel's distance from the truth's exact projection in the target (px) an
 distance of the matched ray from the truth (cm); then the percentiles of the accepted
 errors, the declines by reason, the markers with >= 2 views within 3 cm, and the 3-D error of
 each point the click's ray and the accepted matches' rays make when there are >= 3 of them
-(gsgeo.solve's least squares, as the viewer stores it).
+(gsgeo.solve's least squares, as the viewer stores it). With --foreground the matcher also
+gets the splats about the click (as POST /api/scenes/{scene}/match does): the patch weighted
+by their opacity and warped by their shape too. capture --shape-views asks /views for that
+matcher's views (a corner's or pole top's within 35 degrees of the click's ray).
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ VIEWPORT = {"width": 1280, "height": 720}
 WITHIN_CM = 3.0
 
 
-def capture(data: Path, dataset: Path, markers: list[str]) -> None:
+def capture(data: Path, dataset: Path, markers: list[str], shape_views: bool = False) -> None:
     from playwright.sync_api import sync_playwright
 
     from gsgeo.demo import place, scene
@@ -78,6 +82,15 @@ def capture(data: Path, dataset: Path, markers: list[str]) -> None:
                     cur["views"] = r.json()
 
             pg.on("response", on_response)
+            if shape_views:         # the views for the scene's matcher (POST /views shape_views)
+                def views_for_shapes(route, request) -> None:
+                    if request.method != "POST":
+                        route.continue_()
+                        return
+                    body = json.loads(request.post_data or "{}")
+                    route.continue_(post_data=json.dumps(dict(body, shape_views=True)))
+
+                pg.route("**/api/scenes/*/views", views_for_shapes)
             pg.goto(f"{base}/?scene=demo&project={PROJECT_ID}")
             pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
             pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
@@ -226,6 +239,9 @@ def main() -> None:
     c.add_argument("--data", type=Path, default=REPO / "benchmarks" / "out" / "automatch-data")
     c.add_argument("--dataset", type=Path, default=REPO / "benchmarks" / "out" / "automatch")
     c.add_argument("--markers", default="")
+    c.add_argument("--shape-views", action="store_true",
+                   help="ask /views for the views of the scene's matcher (shape_views: a "
+                        "corner's or pole top's within 35 degrees of the click's ray)")
     e = sub.add_parser("evaluate")
     e.add_argument("--dataset", type=Path, default=REPO / "benchmarks" / "out" / "automatch")
     e.add_argument("--normal", action="store_true", help="pass /depth's normal_ecef")
@@ -238,7 +254,7 @@ def main() -> None:
                    help="the foreground's ball radius, px of the reference view at the point")
     a = ap.parse_args()
     if a.cmd == "capture":
-        capture(a.data, a.dataset, [m for m in a.markers.split(",") if m])
+        capture(a.data, a.dataset, [m for m in a.markers.split(",") if m], a.shape_views)
     else:
         evaluate(a.dataset, a.normal, a.v, a.foreground, a.ball_px)
 

@@ -167,7 +167,8 @@ def test_views_do_not_see_the_ground_at_grazing_incidence():
 
 def test_views_of_a_corner_stay_near_the_first_ray():
     """The foot of a wall (ground and wall splats about the point: not one plane) clicked
-    from the west at 45 degrees: every view lies within NONPLANAR_MAX_DEG of the click's ray,
+    from the west at 45 degrees, views asked for the splat-shaped matcher: every view lies
+    within NONPLANAR_MAX_DEG of the click's ray,
     at least MIN_SEPARATION_DEG from it, and they are spread round it; the same click on the
     ground alone gets wider views (the plane's warp holds there)."""
     a = math.radians(45.0)
@@ -176,7 +177,8 @@ def test_views_of_a_corner_stay_near_the_first_ray():
     corner = index_of(plane_splats(), wall_splats(0.0, top=4.0))
     assert not planar_about(corner, POINT, 0.4)
     assert planar_about(index_of(plane_splats()), POINT, 0.4)
-    views = suggest_views(corner, o, d, np.array([1e-3]), POINT, 4, FOVY, W, H)
+    views = suggest_views(corner, o, d, np.array([1e-3]), POINT, 4, FOVY, W, H,
+                          shape_views=True)
     assert len(views) == 4
     unit = d[0] / np.linalg.norm(d[0])
     backs = []
@@ -190,5 +192,9 @@ def test_views_of_a_corner_stay_near_the_first_ray():
     backs = np.array(backs)
     cos = backs @ backs.T - 2 * np.eye(len(backs))
     assert np.degrees(np.arccos(cos.max())) >= MIN_SEPARATION_DEG - 1e-6
-    wide = suggest_views(index_of(plane_splats()), o, d, np.array([1e-3]), POINT, 4, FOVY, W, H)
+    wide = suggest_views(index_of(plane_splats()), o, d, np.array([1e-3]), POINT, 4, FOVY, W, H,
+                         shape_views=True)
     assert max(v.min_angle_deg for v in wide) > 60.0
+    # not asked for (the plain matcher's views): the corner's are wide too
+    plain = suggest_views(corner, o, d, np.array([1e-3]), POINT, 4, FOVY, W, H)
+    assert max(v.min_angle_deg for v in plain) > 60.0

@@ -17,13 +17,16 @@ only when no unoccluded one is left. Where the first ray meets flat splats (a su
 normal, gsgeo.aim.depth), views that see that surface at less than MIN_INCIDENCE_DEG come
 after all others: the feature is a sliver there, for image matching as for a click.
 
-Where the splats about the point do not lie on one plane (an eaves corner, a pole's top,
+For a matcher that knows the splats (``shape_views``: POST /api/scenes/{scene}/match),
+where the splats about the point do not lie on one plane (an eaves corner, a pole's top,
 a post with its rail: their weighted spread's thinnest axis is not much thinner than the
 next, :func:`planar_about`), the views are kept within NONPLANAR_MAX_DEG of the first
 ray: the matcher (gsgeo.aim.match) warps the click's patch by a plane, which is right about
 a corner only for a small change of view, and a corner seen from 90 degrees round shows
 other faces than the click's. Intersection at 20-35 degrees still gives the point to a
-few times the pixel footprint from one such ray, better from several.
+few times the pixel footprint from one such ray, better from several. Not by default: the
+plain patch matcher (POST /api/match) errs in such near views, where the background
+behind a corner looks alike and matches instead of it.
 """
 
 from __future__ import annotations
@@ -116,8 +119,12 @@ def predicted_traces(origins: FloatArray, directions: FloatArray, ifov: FloatArr
 def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: FloatArray,
                   ifov: FloatArray | None, point: FloatArray, k: int, fovy: float,
                   width: float, height: float, sigma_px: float = 1.0,
-                  model_matrix: FloatArray | None = None) -> list[SuggestedView]:
-    """Up to ``k`` views of ``point`` (rendered ECEF), best first (module docstring).
+                  model_matrix: FloatArray | None = None, shape_views: bool = False
+                  ) -> list[SuggestedView]:
+    """Up to ``k`` views of ``point`` (rendered ECEF), best first (module docstring); with
+    ``shape_views`` those of a point whose splats are not one plane lie within
+    NONPLANAR_MAX_DEG of the first ray (for a matcher that warps by the splats' shape: the
+    plain patch matcher errs there, the background being alike in such near views).
 
     origins, directions : (N, 3) the point's rays (rendered ECEF); ifov (N,) radians, NaN
     (or None) where unknown: then the new view's own pixel angle. ``model_matrix``: the
@@ -139,7 +146,8 @@ def suggest_views(index: SplatIndex | None, origins: FloatArray, directions: Flo
     cams = p + rng * back
     alone = predicted_traces(o, d, f, cams, -back, f_new, sigma_px)
     angles = np.degrees(np.arccos(np.clip(-back @ d.T, -1.0, 1.0))).min(axis=1)
-    if index is not None and not planar_about(index, p, BALL_PX * f[0] * rng, model_matrix):
+    if shape_views and index is not None and \
+            not planar_about(index, p, BALL_PX * f[0] * rng, model_matrix):
         near_first = np.degrees(np.arccos(np.clip(-back @ d[0], -1.0, 1.0))) \
             <= NONPLANAR_MAX_DEG
         alone = np.where(near_first, alone, np.inf)     # not a candidate

@@ -165,6 +165,11 @@ class ViewsRequest(BaseModel):
     height: Annotated[float, Field(ge=1, le=100_000, allow_inf_nan=False)]
     sigma_px: Annotated[float, Field(ge=SIGMA_PX_MIN, le=SIGMA_PX_MAX, allow_inf_nan=False)] = \
         Field(1.0, description="a-priori aiming precision, pixels (the project's)")
+    shape_views: bool = Field(
+        False, description="views for POST /api/scenes/{scene}/match: those of a feature whose "
+                           "splats are not one plane (a corner, a pole top) within 35 degrees of "
+                           "the first ray, where that matcher's splat-shaped warp holds (the "
+                           "plain /api/match errs there)")
 
 
 class SuggestedViewModel(BaseModel):
@@ -187,4 +192,4 @@ class ViewsAnswer(BaseModel):
 def views(scene: SceneName, body: ViewsRequest, request: Request) -> dict[str, Any]:
     folder = scene_folder(request, scene)
     return views_for_point(folder, rays_of(body.rays), body.point_ecef, body.k, body.fovy,
-                           body.width, body.height, body.sigma_px)
+                           body.width, body.height, body.sigma_px, body.shape_views)

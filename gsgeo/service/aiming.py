@@ -117,15 +117,16 @@ def match_views(reference: dict[str, Any], target: dict[str, Any],
 
 
 def views_for_point(scene_dir: Path, rays: Rays, point: Any, k: int, fovy: float,
-                    width: float, height: float, sigma_px: float = 1.0) -> dict[str, Any]:
+                    width: float, height: float, sigma_px: float = 1.0,
+                    shape_views: bool = False) -> dict[str, Any]:
     """Up to ``k`` suggested views of the provisional ``point`` (rendered ECEF) measured by
     ``rays`` in the scene (gsgeo.aim.views.suggest_views), as the JSON of
     POST /api/scenes/{scene}/views. The point is taken to be rendered under the first ray's
-    modelMatrix."""
+    modelMatrix. ``shape_views``: views for the scene's matcher (gsgeo.aim.views)."""
     p = np.asarray(point, dtype=np.float64).reshape(3)
     if np.linalg.norm(p - rays.origins[0]) < 1e-3:
         raise InputError("the point lies at the first ray's origin", field="point_ecef")
     index = scene_splats(scene_dir)
     views = suggest_views(index, rays.origins, rays.directions, rays.ifov, p, k, fovy, width,
-                          height, sigma_px, rays.model_matrix(0))
+                          height, sigma_px, rays.model_matrix(0), shape_views)
     return {"views": [v.to_json() for v in views]}
