@@ -114,21 +114,23 @@ function setCamera(viewer, camera) {
     orientation: { direction: c3(camera.direction), up: c3(camera.up) } });
 }
 
-/** Hide the measuring graphics and the globe (they would cover the feature or cost a frame);
- *  returns the function that shows them again. Nested calls leave them to the outer one, so
- *  that nothing changes between the views of one auto-aim (a change would ask for a frame). */
+/** Hide the measuring graphics, the globe and the sky (they would cover the feature or cost
+ *  time: the sky's atmosphere alone is ~0.6 s of a frame in a software renderer, more than
+ *  the splats of a small crop; the crops' background is then the scene's background colour,
+ *  in the reference and the targets alike); returns the function that shows them again.
+ *  Nested calls leave them to the outer one, so that nothing changes between the views of
+ *  one auto-aim (a change would ask for a frame). */
 let hidden = 0;
 function hideExtras(ctx) {
   const scene = ctx.viewer.scene;
   if (hidden++ > 0) return () => { hidden--; };
-  const shown = ctx.draw.ds.show;
-  const globe = scene.globe.show;
-  ctx.draw.ds.show = false;
-  scene.globe.show = false;
+  const items = [ctx.draw.ds, scene.globe, scene.skyAtmosphere, scene.skyBox, scene.sun, scene.moon]
+    .filter((x) => x && typeof x.show === "boolean");
+  const shown = items.map((x) => x.show);
+  for (const x of items) x.show = false;
   return () => {
     hidden--;
-    ctx.draw.ds.show = shown;
-    scene.globe.show = globe;
+    items.forEach((x, i) => { x.show = shown[i]; });
   };
 }
 
