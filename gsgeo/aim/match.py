@@ -20,6 +20,14 @@ segment (OpenCV).
    object's edge, its background behind) the hint may be far from the feature, so the patch
    is warped for a sweep of depths from near to far and each warp scores the part of the
    segment its depth projects to.
+   With the scene's splats about the click (a ``Foreground``, gsgeo.aim.foreground: what
+   POST /api/scenes/{scene}/match passes), two more things: each patch pixel is weighted by
+   the opacity of those splats there (masked NCC and ECC), so the background around an
+   object's outline (sky, the ground metres behind a pole top or an eaves corner) does not
+   enter the match; and the patch is also warped by the splats' own shape, their depth per
+   half-pixel sample about the click moved along the reference ray, projected into the
+   target (hidden samples left out) and splatted into the template: a corner's faces each
+   turned as the target sees them, which no single plane does.
 3. The target image is resampled into a strip along the segment (``cv2.warpAffine``), the
    warped patch in the same frame (``cv2.warpPerspective``), so the search is the band of
    BAND_PX either side of the line, and ``cv2.matchTemplate`` (normalised cross-correlation,
