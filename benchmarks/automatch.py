@@ -227,6 +227,8 @@ def evaluate(dataset: Path, use_normal: bool, verbose: bool, data: Path | None =
         "per_marker": {m: " ".join((f"{r['cm']:.1f}cm" if r["ok"] else "-")
                                    for r in rows if r["marker"] == m) for m in markers},
         "match_ms_median": float(np.median([r["ms"] for r in rows])) if rows else None,
+        "match_ms_p90_max": [float(np.percentile([r["ms"] for r in rows], 90)),
+                             float(max(r["ms"] for r in rows))] if rows else None,
     }
     print(json.dumps(summary, indent=1))
     return summary

@@ -237,3 +237,16 @@ def test_a_scene_whose_splats_cannot_be_read_is_409_not_500(served, tmp_path):
             r = client.post(path, json=body)
             assert r.status_code == 409, (name, path, r.text)
             assert "cannot be read" in r.json()["message"]
+
+
+def test_views_for_the_scene_matcher_are_asked_by_shape_views(served):
+    """shape_views true is accepted (the plane's splats are one plane: the same views as
+    without it); a value that is not a boolean is 422 naming the field."""
+    client, m = served
+    plain = client.post("/api/scenes/plane/views", json=_views_body(m))
+    shaped = client.post("/api/scenes/plane/views", json=_views_body(m, shape_views=True))
+    assert plain.status_code == 200 and shaped.status_code == 200, shaped.text
+    assert [v["azimuth_deg"] for v in shaped.json()["views"]] == \
+        [v["azimuth_deg"] for v in plain.json()["views"]]
+    r = client.post("/api/scenes/plane/views", json=_views_body(m, shape_views=[1]))
+    assert r.status_code == 422 and "shape_views" in r.json()["message"], r.text
