@@ -3,14 +3,18 @@ the time from A to the auto rays and where it goes, and the operator's clicks pe
 the 3-D error of each method (the accuracy experiment's "auto" row).
 
     python benchmarks/autoaim.py [--data DIR] [--markers G1,B1,...] [--manual] [--out FILE]
+                                 [--at-once] [--web DIR]
 
 For each marker (default all 20 of gsgeo.demo.place.truth_points()): M, one real mouse click on
-the marker from one view (45 degrees up, 12 m, from outside the building), A; the page's
+the marker from one view (45 degrees up, 12 m, from outside the building) once that view is
+drawn (--at-once: as soon as the camera is set, so A also waits for the view's own frames), A;
+the page's
 window.gsgeo.autoaim.last gives the instants (ms from A) of the depth answer, the reference
 crop, the suggested views, each view drawn and matched, and the rays added. With >= 2 auto
 rays the point is stored (Enter, its id); its 3-D error against the truth is recorded.
 --manual also measures each marker by hand: three clicks from three views (the workplace
 tests' procedure), then Enter. The figures are printed and, with --out, written as JSON.
+--web serves the viewer from another web/ directory (e.g. an older commit's, for A/B runs).
 """
 
 from __future__ import annotations
@@ -45,8 +49,25 @@ def outward(local) -> float:
     return float(np.degrees(np.arctan2(local[0] - cx, local[1] - cy)))
 
 
+FINISH_JS = """() => { const c = document.createElement('canvas'); c.width = c.height = 1;
+    const g = c.getContext('2d'); g.drawImage(gsgeo.viewer.scene.canvas, 0, 0, 1, 1);
+    g.getImageData(0, 0, 1, 1); }"""
+#: Whether a click waits for its view to be drawn (--at-once: no, as in the first version).
+SETTLE = True
+
+
 def click(page, t, az: float, el: float, rng: float, off) -> None:
+    """Set the camera, wait until the view is drawn (an operator sees the feature before
+    clicking it), click the marker's window position."""
+    f0 = page.evaluate("gsgeo.renderer.frames")
     a = page.evaluate(AIM_JS, [list(t.ecef), az, el, rng, off])
+    if SETTLE:
+        # (an older viewer, --web, has no settled(): no frame asked and none needed)
+        page.wait_for_function(f"gsgeo.renderer.frames > {f0} && (gsgeo.renderer.settled ? "
+                               "gsgeo.renderer.settled() : gsgeo.renderer.pending === 0 "
+                               "&& !gsgeo.renderer.busy())", timeout=300_000, polling=200)
+        # and drawn: a read of the canvas waits for the frames the page has sent to the GPU
+        page.evaluate(FINISH_JS)
     page.mouse.click(a["x"], a["y"])
 
 
@@ -124,8 +145,13 @@ def main() -> None:
     ap.add_argument("--manual", action="store_true", help="also measure each marker by three clicks")
     ap.add_argument("--manual-only", action="store_true", help="only the three-click measurements")
     ap.add_argument("--out", type=Path, help="write the results as JSON")
+    ap.add_argument("--at-once", action="store_true",
+                    help="click as soon as the camera is set, before its view is drawn (then A "
+                         "waits for that view's frames)")
     ap.add_argument("--web", type=Path, help="serve the viewer from this web/ directory (A/B runs)")
     args = ap.parse_args()
+    global SETTLE
+    SETTLE = not args.at_once
     from playwright.sync_api import sync_playwright
 
     tmp = tempfile.TemporaryDirectory()

@@ -121,6 +121,7 @@ function setCamera(viewer, camera) {
  *  Nested calls leave them to the outer one, so that nothing changes between the views of
  *  one auto-aim (a change would ask for a frame). */
 let hidden = 0;
+const MSAA_OFF = !/[?&]msaa=keep/.test(location.search); // (A/B runs: ?msaa=keep)
 function hideExtras(ctx) {
   const scene = ctx.viewer.scene;
   if (hidden++ > 0) return () => { hidden--; };
@@ -128,9 +129,13 @@ function hideExtras(ctx) {
     .filter((x) => x && typeof x.show === "boolean");
   const shown = items.map((x) => x.show);
   for (const x of items) x.show = false;
+  // no multisampling either: the splats' fragments are drawn once instead of 4 times
+  const msaa = scene.msaaSamples;
+  if (MSAA_OFF && msaa > 1) scene.msaaSamples = 1;
   return () => {
     hidden--;
     items.forEach((x, i) => { x.show = shown[i]; });
+    if (scene.msaaSamples !== msaa) scene.msaaSamples = msaa;
   };
 }
 
@@ -362,6 +367,9 @@ export async function autoAim(ctx, changed = () => {}) {
   let restore = null;
   let held = null;
   try {
+    // held from now on: a frame still asked for the operator's view (the click's ray drawn)
+    // draws none of the splats instead of all of them
+    held = holdSplats(state.tileset);
     say("Auto-aim: finding the feature of ray 1 in other views…");
     const scene = encodeURIComponent(state.sceneName);
     // taken again at ray 1's camera when the capture at the click failed
@@ -389,7 +397,7 @@ export async function autoAim(ctx, changed = () => {}) {
     const matches = [];
     restore = hideExtras(ctx);
     // the splats stay held across the views: no sort of all of them, no full frame between
-    held = holdSplats(state.tileset);
+    if (!held) held = holdSplats(state.tileset);
     for (let i = 0; i < views.length; i++) {
       if (state.measure !== m) return;
       const v = views[i];

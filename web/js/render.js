@@ -75,6 +75,12 @@ export class RenderOnDemand {
     return splatsBusy(this.tileset());
   }
 
+  /** Whether the view is drawn as it will stay: no frame asked or needed, the splats sorted
+   *  for the camera (the operator sees the scene as it is). */
+  settled() {
+    return this.pending === 0 && !this.busy() && !needsSort(this.tileset(), this.viewer.camera);
+  }
+
   /** Something drawn changed: render now and `frames` frames more. */
   request(frames = SETTLE_FRAMES) {
     this.pending = Math.max(this.pending, frames);
@@ -127,7 +133,8 @@ class SplatHold {
     this.p = p;
     this.users = 1;
     this.command = p._drawCommand;
-    this.count = this.command.instanceCount;
+    // (a command muted meanwhile, by SplatHold.release or autoaim.js, draws all its indexes)
+    this.count = this.command.instanceCount || (p._indexes ? p._indexes.length : p._numSplats);
     this.armed = false;
     this.drawnFrame = -1;
     this.ownUpdate = Object.prototype.hasOwnProperty.call(p, "update") ? p.update : undefined;
@@ -246,16 +253,23 @@ function sortedForCamera(p, camera) {
     && C.Cartesian3.angleBetween(camera.directionWC, p._lastSteadySortCameraDirection) < 0.0087;
 }
 
+/** Whether the splats of tileset `t` were last sorted for another pose than Cesium camera
+ *  `camera`'s while no sort or rebuild is under way (askSortFor's condition). */
+function needsSort(t, camera) {
+  const p = t && t.show && t.gaussianSplatPrimitive;
+  if (!p || holds.has(p) || !p._drawCommand || !(p._numSplats > 0) || !p._prevViewMatrix) return false;
+  if (p._sorterState !== 0 || p._sorterPromise || p._pendingSnapshot || p._pendingSortPromise) return false;
+  return !sortedForCamera(p, camera);
+}
+
 /** When the splats of tileset `t` were last sorted for another pose than Cesium camera
  *  `camera`'s and no sort or rebuild is under way, make the next frame sort them for it and
  *  return true. CesiumJS 1.145 re-sorts on a camera change only when its last sort was at
  *  least 3 frames before, and otherwise waits for the next change: a camera that stops within
  *  3 frames of a sort would keep the old order. */
 export function askSortFor(t, camera) {
-  const p = t && t.show && t.gaussianSplatPrimitive;
-  if (!p || holds.has(p) || !p._drawCommand || !(p._numSplats > 0) || !p._prevViewMatrix) return false;
-  if (p._sorterState !== 0 || p._sorterPromise || p._pendingSnapshot || p._pendingSortPromise) return false;
-  if (sortedForCamera(p, camera)) return false;
+  if (!needsSort(t, camera)) return false;
+  const p = t.gaussianSplatPrimitive;
   p._lastSteadySortFrameNumber = -1;
   window.Cesium.Matrix4.clone(window.Cesium.Matrix4.ZERO, p._prevViewMatrix);
   return true;
