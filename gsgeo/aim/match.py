@@ -81,9 +81,11 @@ MAX_TEMPLATES = 16
 #: plane orientations closer than this (cosine) count as one.
 EDGE_ON = 0.2
 SAME_PLANE = 0.985
-#: Matching back from the target view must land this close to the click (px): two matches'
-#: sub-pixel errors (0.5-1 px each for a corner's or a pole's shape warp) add up.
-BACK_MATCH_PX = 1.5
+#: Matching back from the target view must land this close to the click (px); with the
+#: splats known, BACK_MATCH_SHAPE_PX: two matches' sub-pixel errors (0.5-1 px each for a
+#: corner's or a pole's shape warp) add up.
+BACK_MATCH_PX = 1.0
+BACK_MATCH_SHAPE_PX = 1.5
 #: With the splats known (a Foreground), the reference patch's pixels are weighted by the
 #: foreground's opacity, computed this far (px) about the click; a patch whose weight is
 #: FULL_COVER or more of its pixels is matched whole (a surface: nothing to leave out), one
@@ -483,8 +485,9 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     """The click of the reference view found in the target view (module docstring), and
     confirmed by matching back: the patch around the match, searched for in the reference
     view along the target ray's segment over the same stretch of space, must lead back to
-    within BACK_MATCH_PX of the click (a wrong match on repetitive or confusing structure
-    seldom does); otherwise declined as inconsistent.
+    within BACK_MATCH_PX (BACK_MATCH_SHAPE_PX with ``foreground``) of the click (a wrong
+    match on repetitive or confusing structure seldom does); otherwise declined as
+    inconsistent.
 
     ``click``: reference window coordinates; ``near``, ``far``, ``depth``: metres along the
     reference ray (near <= depth <= far); ``normal``: the surface's normal there (rendered
@@ -511,7 +514,8 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
         return declined(f"inconsistent: matching back from the target view fails "
                         f"({back.reason})", there.score, there.second)
     miss = float(np.linalg.norm(back.pixel - click))
-    if miss > BACK_MATCH_PX:
+    if miss > (BACK_MATCH_PX if foreground is None or foreground.count == 0
+               else BACK_MATCH_SHAPE_PX):
         return declined(f"inconsistent: matching back lands {miss:.1f} px from the click",
                         there.score, there.second)
     return there
