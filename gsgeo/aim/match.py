@@ -81,9 +81,9 @@ MAX_TEMPLATES = 16
 #: plane orientations closer than this (cosine) count as one.
 EDGE_ON = 0.2
 SAME_PLANE = 0.985
-#: Matching back from the target view must land this close to the click (px); with the
-#: splats known, BACK_MATCH_SHAPE_PX: two matches' sub-pixel errors (0.5-1 px each for a
-#: corner's or a pole's shape warp) add up.
+#: Matching back from the target view must land this close to the click (px); when the
+#: splats' shape warp matched, BACK_MATCH_SHAPE_PX: two matches' sub-pixel errors (0.5-1 px
+#: each for a corner's or a pole's shape warp) add up.
 BACK_MATCH_PX = 1.0
 BACK_MATCH_SHAPE_PX = 1.5
 #: With the splats known (a Foreground), the reference patch's pixels are weighted by the
@@ -485,7 +485,7 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     """The click of the reference view found in the target view (module docstring), and
     confirmed by matching back: the patch around the match, searched for in the reference
     view along the target ray's segment over the same stretch of space, must lead back to
-    within BACK_MATCH_PX (BACK_MATCH_SHAPE_PX with ``foreground``) of the click (a wrong
+    within BACK_MATCH_PX (BACK_MATCH_SHAPE_PX when the splats' shape warp won) of the click (a wrong
     match on repetitive or confusing structure seldom does); otherwise declined as
     inconsistent.
 
@@ -514,8 +514,7 @@ def match_feature(ref: View, click: FloatArray, tgt: View, near: float, far: flo
         return declined(f"inconsistent: matching back from the target view fails "
                         f"({back.reason})", there.score, there.second)
     miss = float(np.linalg.norm(back.pixel - click))
-    if miss > (BACK_MATCH_PX if foreground is None or foreground.count == 0
-               else BACK_MATCH_SHAPE_PX):
+    if miss > (BACK_MATCH_SHAPE_PX if there.plane is None else BACK_MATCH_PX):
         return declined(f"inconsistent: matching back lands {miss:.1f} px from the click",
                         there.score, there.second)
     return there
@@ -543,8 +542,13 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     if i0 < 0 or j0 < 0 or i0 + 2 * h >= iw or j0 + 2 * h >= ih:
         return declined("outside the view: the patch around the click reaches beyond the "
                         "reference image")
-    weights = None
-    if foreground is not None and foreground.count > 0:     # no splats there: nothing to weigh
+    # the splats about the click: their shape, and the weights of the patch's pixels; none
+    # when the click's own sample shows none of them (the weights alone, with the planes'
+    # warps only, matched the ground beside corners: points 10 cm off on the demo)
+    weights, shape = None, None
+    if foreground is not None and foreground.count > 0:
+        shape = reference_shape(ref, click, foreground)
+    if shape is not None and foreground is not None:
         weights = reference_weights(ref, click, foreground)
         if float(weights[j0:j0 + 2 * h + 1, i0:i0 + 2 * h + 1].mean()) >= FULL_COVER:
             weights = None
@@ -585,11 +589,8 @@ def match_one_way(ref: View, click: FloatArray, tgt: View, near: float, far: flo
     depths = depth_samples(near, far, depth)
     planes: list[FloatArray | None] = list(
         plane_normals(ref.camera, tgt.camera, o + depth * d, normal))
-    shape = None
-    if foreground is not None and foreground.count > 0:
-        shape = reference_shape(ref, click, foreground)
-        if shape is not None:
-            planes.append(None)                # the splats' own shape about the click
+    if shape is not None:
+        planes.append(None)                    # the splats' own shape about the click
     if only_normal:
         planes = ([None] if shape is not None else planes[:1]) if normal is None \
             else planes[:1]
