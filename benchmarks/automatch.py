@@ -2,8 +2,9 @@
 the truth: a dataset captured once, then evaluated offline (fast) as the matcher changes.
 
     python benchmarks/automatch.py capture [--data DIR] [--dataset DIR] [--markers G1,B1,...]
-                                           [--shape-views]
-    python benchmarks/automatch.py evaluate [--dataset DIR] [--normal] [--foreground] [-v]
+                                           [--shape-views] [--scene-match]
+    python benchmarks/automatch.py evaluate [--dataset DIR] [--normal] [--foreground]
+                                            [--answers] [-v]
 
 capture: `gsgeo demo` into --data (kept), `gsgeo serve`, and for each marker the viewer's own
 auto-aim (web/js/autoaim.js: M, one real click on the marker's exact projection from 45
@@ -21,7 +22,9 @@ each point the click's ray and the accepted matches' rays make when there are >=
 (gsgeo.solve's least squares, as the viewer stores it). With --foreground the matcher also
 gets the splats about the click (as POST /api/scenes/{scene}/match does): the patch weighted
 by their opacity and warped by their shape too. capture --shape-views asks /views for that
-matcher's views (a corner's or pole top's within 35 degrees of the click's ray).
+matcher's views (a corner's or pole top's within 35 degrees of the click's ray), and
+--scene-match sends the viewer's matches to that matcher (POST /api/scenes/demo/match with
+the tileset's modelMatrix); evaluate --answers scores the answers the server gave then.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ sys.path.insert(0, str(REPO))
 from gsgeo.aim.camera import Camera  # noqa: E402
 from gsgeo.aim.foreground import BALL_PX, foreground_of_click  # noqa: E402
 from gsgeo.aim.images import decode_image  # noqa: E402
-from gsgeo.aim.match import View, match_feature  # noqa: E402
+from gsgeo.aim.match import MatchResult, View, match_feature  # noqa: E402
 from gsgeo.solve import intersect  # noqa: E402
 
 ELEVATION, RANGE, OFFSET = 45.0, 12.0, [0.4, -0.3, 0.0]
@@ -50,7 +53,8 @@ VIEWPORT = {"width": 1280, "height": 720}
 WITHIN_CM = 3.0
 
 
-def capture(data: Path, dataset: Path, markers: list[str], shape_views: bool = False) -> None:
+def capture(data: Path, dataset: Path, markers: list[str], shape_views: bool = False,
+            scene_match: bool = False) -> None:
     from playwright.sync_api import sync_playwright
 
     from gsgeo.demo import place, scene
@@ -91,6 +95,15 @@ def capture(data: Path, dataset: Path, markers: list[str], shape_views: bool = F
                     route.continue_(post_data=json.dumps(dict(body, shape_views=True)))
 
                 pg.route("**/api/scenes/*/views", views_for_shapes)
+            if scene_match:         # the scene's matcher: POST /api/scenes/demo/match
+                def match_in_scene(route, request) -> None:
+                    body = json.loads(request.post_data or "{}")
+                    body["model_matrix"] = np.asarray(mm, dtype=float).tolist()
+                    route.continue_(url=request.url.replace("/api/match",
+                                                            "/api/scenes/demo/match"),
+                                    post_data=json.dumps(body))
+
+                pg.route("**/api/match", match_in_scene)
             pg.goto(f"{base}/?scene=demo&project={PROJECT_ID}")
             pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
             pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
@@ -145,10 +158,11 @@ def view(v: dict, field: str) -> View:
 
 
 def evaluate(dataset: Path, use_normal: bool, verbose: bool, data: Path | None = None,
-             ball_px: float = BALL_PX) -> dict:
+             ball_px: float = BALL_PX, answers: bool = False) -> dict:
     """The matcher on every captured pair (module docstring); with ``data`` (the demo's data
     folder of the capture) the foreground of the click's splats weights the patches, as the
-    server does when the request names the scene."""
+    server does when the request names the scene. With ``answers`` the server's own answers
+    kept by the capture are scored instead of running the matcher."""
     index = None
     if data is not None:
         from gsgeo.aim.splatindex import scene_index
@@ -171,9 +185,15 @@ def evaluate(dataset: Path, use_normal: bool, verbose: bool, data: Path | None =
                 mm = rec.get("model_matrix")
                 fg = foreground_of_click(index, ref.camera, click, depth["depth_m"],
                                          None if mm is None else np.asarray(mm), ball_px)
-            res = match_feature(ref, click, tgt, depth["near_m"], depth["far_m"],
-                                depth["depth_m"], None if normal is None else np.asarray(normal),
-                                fg)
+            if answers:
+                ans = rec["match_answers"][k]
+                res = MatchResult(bool(ans["ok"]), None if ans["pixel"] is None
+                                  else np.asarray(ans["pixel"], float), ans["score"],
+                                  ans["second"], ans["depth_m"], ans["reason"])
+            else:
+                res = match_feature(ref, click, tgt, depth["near_m"], depth["far_m"],
+                                    depth["depth_m"],
+                                    None if normal is None else np.asarray(normal), fg)
             ms = (time.perf_counter() - t0) * 1e3
             row = {"marker": rec["id"], "view": k + 1, "ok": res.ok, "score": res.score,
                    "reason": res.reason, "ms": ms}
@@ -241,6 +261,9 @@ def main() -> None:
     c.add_argument("--data", type=Path, default=REPO / "benchmarks" / "out" / "automatch-data")
     c.add_argument("--dataset", type=Path, default=REPO / "benchmarks" / "out" / "automatch")
     c.add_argument("--markers", default="")
+    c.add_argument("--scene-match", action="store_true",
+                   help="send the viewer's matches to POST /api/scenes/demo/match (the splats "
+                        "weigh and shape the patches on the server; its answers are kept)")
     c.add_argument("--shape-views", action="store_true",
                    help="ask /views for the views of the scene's matcher (shape_views: a "
                         "corner's or pole top's within 35 degrees of the click's ray)")
@@ -252,13 +275,16 @@ def main() -> None:
                    const=REPO / "benchmarks" / "out" / "automatch-data",
                    help="weight the patches by the splats about the click (the capture's data "
                         "folder, default benchmarks/out/automatch-data)")
+    e.add_argument("--answers", action="store_true",
+                   help="score the server's answers kept by the capture, not the matcher now")
     e.add_argument("--ball-px", type=float, default=BALL_PX,
                    help="the foreground's ball radius, px of the reference view at the point")
     a = ap.parse_args()
     if a.cmd == "capture":
-        capture(a.data, a.dataset, [m for m in a.markers.split(",") if m], a.shape_views)
+        capture(a.data, a.dataset, [m for m in a.markers.split(",") if m], a.shape_views,
+                a.scene_match)
     else:
-        evaluate(a.dataset, a.normal, a.v, a.foreground, a.ball_px)
+        evaluate(a.dataset, a.normal, a.v, a.foreground, a.ball_px, a.answers)
 
 
 if __name__ == "__main__":
