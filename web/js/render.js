@@ -9,10 +9,12 @@
 /** Frames rendered after an explicit request: entities (labels, points) may take one or two
  *  frames to appear after they are added. */
 const SETTLE_FRAMES = 3;
-/** Frames rendered after the camera stops. Each frame draws every splat (seconds in a
- *  software renderer): the splats' sort for the new pose is asked by RenderOnDemand itself
- *  (askSortFor) and keeps frames coming while it runs (splatsBusy), so one is enough. */
-const CAMERA_SETTLE_FRAMES = 1;
+/** Frames rendered after the camera stops: the splats are sorted again for the new pose once
+ *  three frames have passed since the last sort (CesiumJS 1.145); the sort itself then keeps
+ *  frames coming (splatsBusy), and a sort still missed is asked by RenderOnDemand itself
+ *  (askSortFor). (One frame instead of 6 left the camera of a flight short of its end in
+ *  tests/e2e/test_guide.py: not understood yet.) */
+const CAMERA_SETTLE_FRAMES = 6;
 
 /** Whether tileset `t`'s Gaussian splats still need frames: tiles loading, a snapshot being
  *  built or a sort under way (not while they are held: holdSplats). CesiumJS 1.145 (pinned) has no
