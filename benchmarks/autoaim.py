@@ -3,11 +3,12 @@ the time from A to the auto rays and where it goes, and the operator's clicks pe
 the 3-D error of each method (the accuracy experiment's "auto" row).
 
     python benchmarks/autoaim.py [--data DIR] [--markers G1,B1,...] [--manual] [--out FILE]
-                                 [--at-once] [--web DIR]
+                                 [--at-once | --a-when-drawn] [--web DIR]
 
 For each marker (default all 20 of gsgeo.demo.place.truth_points()): M, one real mouse click on
 the marker from one view (45 degrees up, 12 m, from outside the building) once that view is
-drawn (--at-once: as soon as the camera is set, so A also waits for the view's own frames), A;
+drawn (--at-once: as soon as the camera is set, so A also waits for the view's own frames), A
+(at once, or with --a-when-drawn once the frames the click asked are drawn);
 the page's
 window.gsgeo.autoaim.last gives the instants (ms from A) of the depth answer, the reference
 crop, the suggested views, each view drawn and matched, and the rays added. With >= 2 auto
@@ -54,6 +55,8 @@ FINISH_JS = """() => { const c = document.createElement('canvas'); c.width = c.h
     g.getImageData(0, 0, 1, 1); }"""
 #: Whether a click waits for its view to be drawn (--at-once: no, as in the first version).
 SETTLE = True
+#: Whether A waits for the click's frames (the ray and the guide drawn): --a-when-drawn.
+A_SETTLE = False
 
 
 def click(page, t, az: float, el: float, rng: float, off) -> None:
@@ -62,13 +65,18 @@ def click(page, t, az: float, el: float, rng: float, off) -> None:
     f0 = page.evaluate("gsgeo.renderer.frames")
     a = page.evaluate(AIM_JS, [list(t.ecef), az, el, rng, off])
     if SETTLE:
-        # (an older viewer, --web, has no settled(): no frame asked and none needed)
-        page.wait_for_function(f"gsgeo.renderer.frames > {f0} && (gsgeo.renderer.settled ? "
-                               "gsgeo.renderer.settled() : gsgeo.renderer.pending === 0 "
-                               "&& !gsgeo.renderer.busy())", timeout=300_000, polling=200)
-        # and drawn: a read of the canvas waits for the frames the page has sent to the GPU
-        page.evaluate(FINISH_JS)
+        drawn(page, f0)
     page.mouse.click(a["x"], a["y"])
+
+
+def drawn(page, f0: int) -> None:
+    """Wait until a frame after frame count `f0` is drawn and no more are asked or needed."""
+    # (an older viewer, --web, has no settled(): no frame asked and none needed)
+    page.wait_for_function(f"gsgeo.renderer.frames > {f0} && (gsgeo.renderer.settled ? "
+                           "gsgeo.renderer.settled() : gsgeo.renderer.pending === 0 "
+                           "&& !gsgeo.renderer.busy())", timeout=300_000, polling=200)
+    # and drawn: a read of the canvas waits for the frames the page has sent to the GPU
+    page.evaluate(FINISH_JS)
 
 
 def store(page, t) -> dict:
@@ -104,8 +112,11 @@ def summary(r: dict) -> str:
 def auto_point(page, t) -> dict:
     page.keyboard.press("m")
     page.wait_for_selector("#measure-panel:not([hidden])")
+    f0 = page.evaluate("gsgeo.renderer.frames")
     click(page, t, outward(t.local), ELEVATION, RANGE, OFFSET)
     page.wait_for_function("gsgeo.state.measure.rays.length === 1")
+    if A_SETTLE:  # the ray and the guide drawn after the click before A
+        drawn(page, f0)
     t0 = time.perf_counter()
     page.keyboard.press("a")
     page.wait_for_function("gsgeo.state.measure.autoaim && !gsgeo.state.measure.autoaim.running",
@@ -148,10 +159,13 @@ def main() -> None:
     ap.add_argument("--at-once", action="store_true",
                     help="click as soon as the camera is set, before its view is drawn (then A "
                          "waits for that view's frames)")
+    ap.add_argument("--a-when-drawn", action="store_true",
+                    help="press A once the frames the click asked (its ray, the guide) are drawn")
     ap.add_argument("--web", type=Path, help="serve the viewer from this web/ directory (A/B runs)")
     args = ap.parse_args()
-    global SETTLE
+    global SETTLE, A_SETTLE
     SETTLE = not args.at_once
+    A_SETTLE = args.a_when_drawn and not args.at_once
     from playwright.sync_api import sync_playwright
 
     tmp = tempfile.TemporaryDirectory()
