@@ -108,3 +108,43 @@ def test_each_chunk_finds_its_points_by_primary_key(store, tmp_path):
                for p in plan), plan
     assert not any(p.startswith("SCAN points") for p in plan), plan
     assert sqlitebulk.CHUNK * 7 < 32766  # SQLite's limit on a statement's parameters
+
+
+def test_a_remeasure_in_blocks_keeps_every_point_and_its_reason(tmp_path, monkeypatch):
+    """Blocks of 2 points (gsgeo.service.projects.REMEASURE_BLOCK), chunks of 3 rows: each
+    point gets its own new result, in the new grid (pyproj directly), and a point whose
+    stored rays cannot be read keeps a reason, wherever it falls between blocks."""
+    import pyproj
+    from servertools import LONDON, ecef_of, rays_at
+
+    import gsgeo.service.projects as projects
+    from gsgeo.service import Projects
+
+    monkeypatch.setattr(projects, "REMEASURE_BLOCK", 2)
+    monkeypatch.setattr(sqlitebulk, "CHUNK", 3)
+    store = open_store(tmp_path)
+    try:
+        svc = Projects(store, tmp_path)
+        p = svc.create_project(name="L", crs="EPSG:32630")
+        targets = [(LONDON[0] + 0.001 * k, LONDON[1], 40.0 + k) for k in range(7)]
+        for k, t in enumerate(targets):
+            svc.add_point(p.id, {"id": f"T{k}", "rays": rays_at(ecef_of(*t), 3)})
+        bad = {"T2", "T3", "T6"}  # a block's end, the next block's start, the last point
+        with store.transaction() as tx:
+            for pt in tx.list_points(p.id):
+                if pt.id in bad:
+                    pt.rays = [{"origin": [1, 2, 3], "direction": [0, 0, 0]}] * 2
+                    tx.update_point(pt)
+        svc.update_project(p.id, {"crs": "EPSG:32631"})
+        utm31 = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:32631", always_xy=True)
+        for k, t in enumerate(targets):
+            pt = svc.get_point(p.id, f"T{k}")
+            if pt.id in bad:
+                assert pt.result is None and "direction" in (pt.error or "")
+                continue
+            e, n = utm31.transform(t[0], t[1])
+            assert pt.error is None and pt.record["point_id"] == pt.id
+            assert pt.record["easting"] == pytest.approx(e, abs=1e-4)
+            assert pt.record["northing"] == pytest.approx(n, abs=1e-4)
+    finally:
+        store.close()

@@ -85,6 +85,9 @@ KINDS = {"line": 2, "polygon": 3}  # kind -> minimum number of points
 #: What a point's frame record holds (gsgeo.service.georeferencing.frame_record).
 FRAME_KEYS = frozenset({"version", "root_transform"})
 MAX_FEATURE_POINTS = 10_000
+#: Stored points measured at once in a re-measure: blocks large enough for the vectorised
+#: batch, small enough that the store's writer has work while the next block is measured.
+REMEASURE_BLOCK = 1000
 
 
 def _text(value: JSON, field: str, max_len: int = 2000) -> str:
@@ -306,9 +309,9 @@ class Projects(BuildingService):
 
     def _measure_many(self, pts: list[PointRecord], p: Project, ctx: SceneFrame | None
                       ) -> Iterator[PointRecord]:
-        """Re-measure stored points with the settings of ``p`` in the scene frame ``ctx``, all
-        at once (gsgeo.measure.batch: vectorised, point by point the result _measure_into
-        gives); a point that fails keeps the reason. Yields each point with its new result
+        """Re-measure stored points with the settings of ``p`` in the scene frame ``ctx``,
+        REMEASURE_BLOCK at once (gsgeo.measure.batch: vectorised, point by point the result
+        _measure_into gives); a point that fails keeps the reason. Yields each point with its new result
         for the store to write, then lets go of that result (its JSON is made and written
         one point at a time, while it is still in the caches)."""
         measured: list[JSONObject | str | None] = [None] * len(pts)
@@ -330,25 +333,52 @@ class Projects(BuildingService):
                 typed.append((k, rays))
             else:
                 measured[k] = str(rays)
+        settings: SolveSettings | str | None = None
         if typed:
             try:
                 settings = solve_settings(p.settings(), self.data_dir,
                                           None if ctx is None else ctx.frame)
-                results = measure_batch_json([(pts[k].id, pts[k].code, pts[k].description,
-                                               rays, pts[k].excluded) for k, rays in typed],
-                                             settings)
-                for (k, _), res in zip(typed, results, strict=True):
-                    measured[k] = res.error if isinstance(res, MeasurementFailure) else res
             except GsgeoError as exc:  # the settings fail every point alike (a missing grid)
-                for k, _ in typed:
+                settings = str(exc)
+        # measured a block at a time: the store writes one block (on its writer thread, see
+        # gsgeo.store.sqlitebulk) while the next is measured
+        done_to = 0
+        for start in range(0, len(typed), REMEASURE_BLOCK):
+            block = typed[start:start + REMEASURE_BLOCK]
+            if isinstance(settings, str):
+                for k, _ in block:
+                    measured[k] = settings
+                continue
+            assert settings is not None  # made when there are typed rays
+            try:
+                results = measure_batch_json([(pts[k].id, pts[k].code, pts[k].description,
+                                               rays, pts[k].excluded) for k, rays in block],
+                                             settings)
+                for (k, _), res in zip(block, results, strict=True):
+                    measured[k] = res.error if isinstance(res, MeasurementFailure) else res
+            except GsgeoError as exc:  # the settings fail every point alike
+                for k, _ in block:
                     measured[k] = str(exc)
-        for pt, done in zip(pts, measured, strict=True):
+            end = typed[start + REMEASURE_BLOCK][0] if start + REMEASURE_BLOCK < len(typed) \
+                else len(pts)
+            yield from self._results_of(pts, measured, done_to, end)
+            done_to = end
+        yield from self._results_of(pts, measured, done_to, len(pts))
+
+    @staticmethod
+    def _results_of(pts: list[PointRecord], measured: list[JSONObject | str | None],
+                    start: int, end: int) -> Iterator[PointRecord]:
+        """Points ``start:end`` with their new results (a dict) or reasons (a text), each
+        result let go of once the store has written it."""
+        for k in range(start, end):
+            pt, done = pts[k], measured[k]
             pt.record = None  # the point-schema record is derived when the point is read again
             if isinstance(done, dict):
                 # Measurement.to_dict(), stored as is: the store writes non-finite numbers as null
                 pt.result, pt.error = done, None
             else:
                 pt.result, pt.error = None, done
+            measured[k] = None
             yield pt
             pt.result = None  # written
 

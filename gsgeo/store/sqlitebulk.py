@@ -49,7 +49,9 @@ def write_results(con: sqlite3.Connection, points: Iterable[PointRecord], now: s
     ``result_rows`` makes it with ``dumps``: made on this thread, written on a writer thread a
     chunk behind. An error on either side stops both and is raised here (the caller's
     transaction then rolls back)."""
-    todo: queue.Queue[object] = queue.Queue(maxsize=2)
+    # room for a block of the caller's (gsgeo.service: 1000 points, 5 chunks) while the
+    # next block is measured
+    todo: queue.Queue[object] = queue.Queue(maxsize=16)
     failed: list[BaseException] = []
 
     def writer() -> None:
