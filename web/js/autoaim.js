@@ -7,7 +7,9 @@
 // /api/scenes/{scene}/depth: where along it the splats are), K suggested views (POST
 // /api/scenes/{scene}/views); for each view the camera is set, the splats are drawn sorted for
 // it, the canvas around ray 1's epipolar segment (near..far projected into the view) is cut out
-// and POST /api/match finds the reference there. The requests run while the next view renders.
+// and POST /api/scenes/{scene}/match finds the reference there (the scene's splats about the
+// click weight the patch and warp it by their shape). The requests run while the next view
+// renders.
 // A matched pixel becomes a ray by the same math as a click (rays.js's captureRay at that
 // view's camera); a declined view is reported with its reason. The camera then returns to the
 // view of the first click.
@@ -387,6 +389,9 @@ export async function autoAim(ctx, changed = () => {}) {
     const res = await api("POST", `/scenes/${scene}/views`, {
       rays: m.rays.filter((r, i) => !m.excluded.has(i)), point_ecef: depth.point_ecef, k: K,
       fovy: cam.fovy, width: cam.width, height: cam.height, ...(ctx.solveSettings ? { sigma_px: ctx.solveSettings().sigma_px } : {}),
+      // views near ray 1 for a corner or a pole top: only with the scene's match below, which
+      // knows the splats' shape (the plain match on such views matched the background)
+      shape_views: true,
     });
     timings.suggested = at();
     const views = res.views || [];
@@ -414,10 +419,12 @@ export async function autoAim(ctx, changed = () => {}) {
       const target = { image: crop.toDataURL("image/png"), origin: [box[0], box[1]], camera: vc };
       images.push(target.image);
       // matched while the next view renders
-      matches.push(api("POST", "/match", {
+      // the scene's match: the splats about the click weight the patch and warp it by their shape
+      matches.push(api("POST", `/scenes/${scene}/match`, {
         reference: { image: ref.image, origin: ref.origin, camera: ref.camera, pixel: ref.pixel },
         target,
         depth: { near_m: depth.near_m, far_m: depth.far_m, depth_m: depth.depth_m },
+        model_matrix: ray1.model_matrix || ctx.modelMatrix(),
       }).then((ans) => { tv.matched = at(); return { i, v, ans, crop, origin: target.origin }; },
         (exc) => { tv.matched = at(); return { i, v, ans: { ok: false, reason: exc.message }, crop, origin: target.origin }; }));
     }
