@@ -74,7 +74,7 @@ def drawn(page, f0: int) -> None:
     # (an older viewer, --web, has no settled(): no frame asked and none needed)
     page.wait_for_function(f"gsgeo.renderer.frames > {f0} && (gsgeo.renderer.settled ? "
                            "gsgeo.renderer.settled() : gsgeo.renderer.pending === 0 "
-                           "&& !gsgeo.renderer.busy())", timeout=300_000, polling=200)
+                           "&& !gsgeo.renderer.busy())", timeout=90_000, polling=200)
     # and drawn: a read of the canvas waits for the frames the page has sent to the GPU
     page.evaluate(FINISH_JS)
 
@@ -95,6 +95,14 @@ def store(page, t) -> dict:
 
 def error_of(pt: dict, t) -> float:
     return float(np.linalg.norm(np.asarray(pt["result"]["point_ecef"]) - np.asarray(t.ecef)))
+
+
+def maha2_of(pt: dict, t) -> float:
+    """Squared Mahalanobis distance of the truth from the stored point under its stated total
+    covariance (ECEF): inside the 95 % ellipsoid when below chi2(3, 0.95) = 7.81."""
+    d = np.asarray(pt["result"]["point_ecef"]) - np.asarray(t.ecef)
+    cov = np.asarray(pt["result"]["cov_ecef_total"], dtype=float).reshape(3, 3)
+    return float(d @ np.linalg.solve(cov, d))
 
 
 def summary(r: dict) -> str:
@@ -126,7 +134,9 @@ def auto_point(page, t) -> dict:
     out = {"id": t.id, "wall_s": wall, "timings": last, "clicks": 1}
     print(f"{t.id}: {summary(out)}", flush=True)
     if last["added"] >= 2:
-        out["error_m"] = error_of(store(page, t), t)
+        pt = store(page, t)
+        out["error_m"], out["maha2"] = error_of(pt, t), maha2_of(pt, t)
+        out["rays"] = len(pt["rays"])
     else:
         page.keyboard.press("Escape")
         page.wait_for_selector("#measure-panel", state="hidden")
@@ -142,7 +152,8 @@ def manual_point(page, t) -> dict:
     for i, v in enumerate(views):
         click(page, t, *v)
         page.wait_for_function(f"gsgeo.state.measure.rays.length === {i + 1}")
-    return {"id": t.id, "clicks": len(views), "error_m": error_of(store(page, t), t)}
+    pt = store(page, t)
+    return {"id": t.id, "clicks": len(views), "error_m": error_of(pt, t), "maha2": maha2_of(pt, t)}
 
 
 def rmse(xs: list[float]) -> float:
@@ -166,6 +177,7 @@ def main() -> None:
     global SETTLE, A_SETTLE
     SETTLE = not args.at_once
     A_SETTLE = args.a_when_drawn and not args.at_once
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
     from playwright.sync_api import sync_playwright
 
     tmp = tempfile.TemporaryDirectory()
@@ -189,7 +201,17 @@ def main() -> None:
             page.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
                                    timeout=300_000)
             for pid in [] if args.manual_only else ids:
-                r = auto_point(page, truth[pid])
+                try:
+                    r = auto_point(page, truth[pid])
+                except PlaywrightTimeout as exc:  # reported, and the sweep goes on
+                    print(f"{pid}: timed out ({str(exc).splitlines()[0]}); page reloaded", flush=True)
+                    auto.append({"id": pid, "timeout": True, "timings": {}, "clicks": 1})
+                    page.goto(f"{base}/?scene=demo&project={PROJECT_ID}")
+                    page.wait_for_function("window.gsgeo && window.gsgeo.ready === true",
+                                           timeout=120_000)
+                    page.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && "
+                                           "gsgeo.tileset.tilesLoaded", timeout=300_000)
+                    continue
                 err = f"{1000 * r['error_m']:.1f} mm from the truth" if "error_m" in r else "not stored"
                 print(f"{pid}: {err}", flush=True)
                 auto.append(r)
@@ -217,9 +239,15 @@ def main() -> None:
         print(f"\nauto: {len(done)} of {len(auto)} stored; {median}")
         print(f"auto: 1 click per point (+ A); RMSE 3-D {100 * rmse([r['error_m'] for r in done]):.2f} cm "
               f"over {len(done)} points")
+        good = [r for r in done if r["error_m"] <= 0.03 and r.get("rays", 0) >= 3]
+        print(f"auto: {len(good)} of {len(auto)} stored with >= 3 rays within 3 cm; worst "
+              f"{100 * max([r['error_m'] for r in done], default=float('nan')):.1f} cm; "
+              f"95 % ellipsoid holds the truth for {sum(r['maha2'] < 7.815 for r in done)} of {len(done)}; "
+              f"timed out: {sum(1 for r in auto if r.get('timeout'))}")
     if manual:
         print(f"manual: 3 clicks per point; RMSE 3-D {1000 * rmse([r['error_m'] for r in manual]):.2f} mm "
-              f"over {len(manual)} points")
+              f"over {len(manual)} points; 95 % ellipsoid holds the truth for "
+              f"{sum(r['maha2'] < 7.815 for r in manual)} of {len(manual)}")
     if args.out:
         args.out.write_text(json.dumps({"auto": auto, "manual": manual}, indent=1))
 
