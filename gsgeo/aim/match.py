@@ -342,11 +342,11 @@ def shape_patch(tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
         flat = by[inside] * n + bx[inside]
         acc_w += np.bincount(flat, weights=k[inside], minlength=n * n)
         acc_v += np.bincount(flat, weights=k[inside] * val[inside], minlength=n * n)
-    acc_w = acc_w.reshape(n, n)
+    weight = acc_w.reshape(n, n)
     with np.errstate(invalid="ignore", divide="ignore"):
-        templ = np.where(acc_w > 1e-6, acc_v.reshape(n, n) / acc_w, 0.0).astype(np.float32)
+        templ = np.where(weight > 1e-6, acc_v.reshape(n, n) / weight, 0.0).astype(np.float32)
     # half-pixel samples: about 4 per covered pixel when the view keeps the scale
-    tmask = np.clip(acc_w / SHAPE_DENSITY, 0.0, 1.0).astype(np.float32)
+    tmask = np.clip(weight / SHAPE_DENSITY, 0.0, 1.0).astype(np.float32)
     tmask[tmask < 0.25] = 0.0
     if float(tmask.sum()) < MIN_COVER_PX:
         return (f"weak: the feature covers {float(tmask.sum()):.0f} px of the patch around "
