@@ -348,12 +348,19 @@ def shape_patch(tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
     # half-pixel samples: about 4 per covered pixel when the view keeps the scale
     tmask = np.clip(weight / SHAPE_DENSITY, 0.0, 1.0).astype(np.float32)
     tmask[tmask < 0.25] = 0.0
-    if float(tmask.sum()) < MIN_COVER_PX:
+    weak = patch_too_weak(templ, tmask)
+    return weak if weak is not None else (templ, tmask, float(c[0]))
+
+
+def patch_too_weak(templ: np.ndarray, tmask: np.ndarray | None) -> str | None:
+    """Why a warped patch (and its weights, None: all 1) cannot be matched: too few weighted
+    pixels or no texture under them; None when it can."""
+    if tmask is not None and float(tmask.sum()) < MIN_COVER_PX:
         return (f"weak: the feature covers {float(tmask.sum()):.0f} px of the patch around "
                 f"the click, below {MIN_COVER_PX:.0f}")
     if weighted_std(templ, tmask) < MIN_TEXTURE:
         return "weak: no texture around the click to match"
-    return templ, tmask, float(c[0])
+    return None
 
 
 def warped_patch(ref: View, tgt: View, strip_from_target: np.ndarray, origin: FloatArray,
@@ -388,12 +395,8 @@ def warped_patch(ref: View, tgt: View, strip_from_target: np.ndarray, origin: Fl
         tmask = cv2.warpPerspective(weights, back, (2 * h + 1, 2 * h + 1),
                                     flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                     borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
-        if float(tmask.sum()) < MIN_COVER_PX:
-            return (f"weak: the feature covers {float(tmask.sum()):.0f} px of the patch around "
-                    f"the click, below {MIN_COVER_PX:.0f}")
-    if weighted_std(templ, tmask) < MIN_TEXTURE:
-        return "weak: no texture around the click to match"
-    return templ, tmask, float(c[0])
+    weak = patch_too_weak(templ, tmask)
+    return weak if weak is not None else (templ, tmask, float(c[0]))
 
 
 @dataclass(frozen=True)
