@@ -240,10 +240,16 @@ def test_epipolar_segments_and_predicted_pixel_agree_with_an_independent_project
     assert page.errors == [], page.errors
 
 
-def wait_camera_at(page, position, tol_m: float = 0.01) -> None:
-    page.wait_for_function("""([p, tol]) => { const c = gsgeo.viewer.camera.positionWC;
-        return Math.hypot(c.x - p[0], c.y - p[1], c.z - p[2]) < tol; }""",
-                           arg=[position, tol_m], timeout=20_000)
+def wait_camera_at(page, position, direction=None, tol_m: float = 0.01, tol_dir: float = 1e-6) -> None:
+    """Wait until the camera is within tol_m of position (ECEF, m) and, if given, its view
+    direction within tol_dir of direction: a flight's last frames still turn the camera
+    after its position has (nearly) arrived."""
+    page.wait_for_function("""([p, d, tol, tolDir]) => { const cam = gsgeo.viewer.camera;
+        const c = cam.positionWC, v = cam.directionWC;
+        if (Math.hypot(c.x - p[0], c.y - p[1], c.z - p[2]) >= tol) return false;
+        if (d === null) return true;
+        return Math.max(Math.abs(v.x - d[0]), Math.abs(v.y - d[1]), Math.abs(v.z - d[2])) < tolDir; }""",
+                           arg=[position, direction, tol_m, tol_dir], timeout=20_000)
 
 
 def test_v_flies_to_suggested_views_from_which_the_marker_is_seen(measuring):
@@ -263,7 +269,7 @@ def test_v_flies_to_suggested_views_from_which_the_marker_is_seen(measuring):
         page.wait_for_function("(t) => document.querySelector('#messages').innerText.includes(t)",
                                arg=f"Suggested view {k + 1} of {len(views)}", timeout=5_000)
         target = views[k]["camera"]
-        wait_camera_at(page, target["position"])
+        wait_camera_at(page, target["position"], target["direction"])
         cam = settled(page)["camera"]
         assert np.allclose(cam["direction"], target["direction"], atol=1e-6), (cam, target)
         x, y = project(cam, truth_ecef())
