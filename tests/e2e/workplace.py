@@ -72,6 +72,7 @@ AIM_JS = """([target, azDeg, elDeg, range, lookOffset]) => {
   const upGuess = C.Matrix4.multiplyByPointAsVector(enu, C.Cartesian3.UNIT_Z, new C.Cartesian3());
   const right = C.Cartesian3.normalize(C.Cartesian3.cross(dir, upGuess, V()), V());
   const up = C.Cartesian3.cross(right, dir, new C.Cartesian3());
+  v.camera.cancelFlight();  // a flight still under way (V) would move the camera after this
   v.camera.setView({destination: pos, orientation: {direction: dir, up: up}});
   const win = C.SceneTransforms.worldToWindowCoordinates(v.scene, K);
   const ray = v.camera.getPickRay(win);

@@ -1,34 +1,62 @@
 // Render on demand: the scene is drawn only when something changes (Cesium's
 // requestRenderMode), not 60 times a second while the operator reads the panels.
 // Cesium renders by itself on camera moves; this module keeps frames coming while the
-// tileset loads and while its Gaussian splats are (re)built and sorted for the camera (CesiumJS
-// 1.145 does that over several frames and in a worker, without asking for a frame when it is
-// done), and a few frames after the page changes what the overlay or the entities show.
+// tileset loads and its Gaussian splats are (re)built, and asks the frames a new camera pose
+// needs for the splats' order: CesiumJS 1.145 sorts them in a worker, started by a frame, and
+// commits the sort in a later frame, without asking for a frame when it is done.
+//
+// Every frame draws all the splats (seconds each in a software renderer), so no frame is asked
+// that draws nothing new: none while the worker sorts, and a finished sort is committed between
+// frames (adoptSort) so that the one frame asked then draws it.
 
+/** Frames rendered after an explicit request's own: none, as the entities (points, labels)
+ *  added are updated by the clock tick that precedes the frame asked. */
+const EXTRA_FRAMES = 0;
 
-/** Frames rendered after an explicit request: entities (labels, points) may take one or two
- *  frames to appear after they are added. */
-const SETTLE_FRAMES = 3;
-/** Frames rendered after the camera stops: the splats are sorted again for the new pose once
- *  three frames have passed since the last sort (CesiumJS 1.145); the sort itself then keeps
- *  frames coming (splatsBusy), and a sort still missed is asked by RenderOnDemand itself
- *  (askSortFor). (One frame instead of 6 left the camera of a flight short of its end in
- *  tests/e2e/test_guide.py: not understood yet.) */
-const CAMERA_SETTLE_FRAMES = 6;
+/** CesiumJS 1.145's GaussianSplatSortingState (a private enum of GaussianSplatPrimitive). */
+const SORT_IDLE = 0;
+const SORT_SORTING = 2;
+const SORT_SORTED = 3;
 
 /** Whether tileset `t`'s Gaussian splats still need frames: tiles loading, a snapshot being
- *  built or a sort under way (not while they are held: holdSplats). CesiumJS 1.145 (pinned) has no
- *  public signal for this: it reads the splat primitive's state (revisit on a Cesium upgrade). */
+ *  built, a sort to start or to commit (not while the worker sorts, nor while they are held:
+ *  holdSplats). CesiumJS 1.145 (pinned) has no public signal for this: it reads the splat
+ *  primitive's state (revisit on a Cesium upgrade). */
 export function splatsBusy(t) {
   if (!t || !t.show || splatsHeld(t)) return false;
   if (!t.tilesLoaded) return true;
   const p = t.gaussianSplatPrimitive;
   if (!p) return false;
   if (t.statistics.numberOfPointsSelected > 0 && p._numSplats !== t.statistics.numberOfPointsSelected) return true;
-  if (p._pendingSnapshot || p._needsSnapshotRebuild || p._dirty || p._pendingSortPromise || p._sorterPromise) return true;
-  if (p._sorterState !== undefined && p._sorterState !== 0) return true; // 0: IDLE
+  if (p._pendingSnapshot || p._needsSnapshotRebuild || p._dirty || p._pendingSortPromise) return true;
+  // the worker sorts: no frame is of use until it is done (adoptSort then asks one)
+  if (p._sorterState === SORT_SORTING && p._sorterPromise) return false;
+  if (p._sorterState !== undefined && p._sorterState !== SORT_IDLE) return true;
   // no command yet, or one muted by SplatHold.release until the next sort
   return p._numSplats > 0 && (!p._drawCommand || p._drawCommand.instanceCount === 0);
+}
+
+/** Whether a sort of tileset `t`'s splats is under way or waits to be committed. */
+function sortPending(t) {
+  const p = t && t.show && t.gaussianSplatPrimitive;
+  return !!p && !holds.has(p) && ((p._sorterState !== undefined && p._sorterState !== SORT_IDLE) || !!p._sorterPromise);
+}
+
+/** When the worker has finished sorting tileset `t`'s splats, build the draw command of the
+ *  new order now, as CesiumJS 1.145 does for a new snapshot's first sort, instead of in the
+ *  next frame (which would draw the old order once more, then the new one a frame later);
+ *  returns whether it did. The same steps as the primitive's update in its SORTED state. */
+function adoptSort(t, scene) {
+  const p = t && t.show && t.gaussianSplatPrimitive;
+  if (!p || holds.has(p) || p._sorterState !== SORT_SORTED) return false;
+  const build = p.constructor && p.constructor.buildGSplatDrawCommand;
+  if (typeof build !== "function" || !scene.frameState) return false;
+  build(p, scene.frameState);
+  p._sorterState = SORT_IDLE;
+  p._dirty = false;
+  p._sorterPromise = undefined;
+  p._activeSort = undefined;
+  return true;
 }
 
 /** Whether tileset `t` shows its scene: every tile loaded and, for Gaussian splats, every
@@ -55,18 +83,21 @@ export class RenderOnDemand {
     this.moving = false;
     scene.postRender.addEventListener(() => { this.frames++; });
     viewer.camera.moveStart.addEventListener(() => { this.moving = true; });
-    viewer.camera.moveEnd.addEventListener(() => {
-      this.moving = false;
-      this.request(CAMERA_SETTLE_FRAMES);
-    });
+    viewer.camera.moveEnd.addEventListener(() => { this.moving = false; });
+    // a frame about to be drawn for a new pose (a jump, the end of a flight) starts the sort
+    // for it now rather than 3 frames after the last one (Cesium's own pace)
+    scene.preRender.addEventListener(() => { askSortFor(this.tileset(), viewer.camera); });
     // runs on every animation tick, rendered or not: ask for the next frame while needed
     scene.postUpdate.addEventListener(() => {
-      if (this.pending > 0) {
+      const t = this.tileset();
+      if (adoptSort(t, scene)) {
+        scene.requestRender();
+      } else if (this.pending > 0) {
         this.pending--;
         scene.requestRender();
       } else if (this.busy()) {
         scene.requestRender();
-      } else if (!this.moving && askSortFor(this.tileset(), viewer.camera)) {
+      } else if (!this.moving && askSortFor(t, viewer.camera)) {
         scene.requestRender();
       }
     });
@@ -80,12 +111,13 @@ export class RenderOnDemand {
   /** Whether the view is drawn as it will stay: no frame asked or needed, the splats sorted
    *  for the camera (the operator sees the scene as it is). */
   settled() {
-    return this.pending === 0 && !this.busy() && !needsSort(this.tileset(), this.viewer.camera);
+    const t = this.tileset();
+    return this.pending === 0 && !this.busy() && !sortPending(t) && !needsSort(t, this.viewer.camera);
   }
 
-  /** Something drawn changed: render now and `frames` frames more. */
-  request(frames = SETTLE_FRAMES) {
-    this.pending = Math.max(this.pending, frames);
+  /** Something drawn changed: render now and `extra` frames more. */
+  request(extra = EXTRA_FRAMES) {
+    this.pending = Math.max(this.pending, extra);
     this.viewer.scene.requestRender();
   }
 }
