@@ -146,6 +146,8 @@ def test_loading_indicator_then_render_on_demand(server, browser):
         # machine Cesium's own task completions still ask for most frames: see the report)
         assert page.evaluate("gsgeo.viewer.scene.requestRenderMode === true"
                              " && gsgeo.viewer.scene.maximumRenderTimeChange === Infinity")
+        # headless Chromium draws with SwiftShader: no multisampling there
+        assert page.evaluate("gsgeo.viewer.scene.msaaSamples") == 1
         idle = page.evaluate(FRAMES_JS, True)
         continuous = page.evaluate(FRAMES_JS, False)
         print(f"on demand {idle}, continuous {continuous}")

@@ -12,7 +12,7 @@ import { georefPanel } from "./georef.js";
 import { buildingsPanel } from "./buildings.js";
 import { georefVersion, moveCamera } from "./similarity.js";
 import { tileFailureText } from "./scenehost.js";
-import { RenderOnDemand, splatsShown } from "./render.js";
+import { RenderOnDemand, msaaSamplesFor, rendererName, splatsShown } from "./render.js";
 import { installGuide } from "./guide.js";
 import { nextView } from "./views.js";
 
@@ -68,6 +68,13 @@ viewer.scene.globe.showGroundAtmosphere = false;
 viewer.scene.fog.enabled = false;
 viewer.cesiumWidget.screenSpaceEventHandler.removeInputAction(Cesium.ScreenSpaceEventType.LEFT_CLICK);
 viewer.cesiumWidget.screenSpaceEventHandler.removeInputAction(Cesium.ScreenSpaceEventType.LEFT_DOUBLE_CLICK);
+// no multisampling on a software renderer (render.js's msaaSamplesFor; ?msaa= overrides)
+{
+  const canvas = viewer.scene.canvas; // its WebGL context is Cesium's: getContext returns it
+  const samples = msaaSamplesFor(new URLSearchParams(location.search).get("msaa"),
+    rendererName(canvas.getContext("webgl2") || canvas.getContext("webgl")));
+  if (samples !== null) viewer.scene.msaaSamples = samples;
+}
 // the scene is drawn on demand (render.js): what changes the drawing asks for a frame
 const renderer = new RenderOnDemand(viewer, () => state.tileset);
 const draw = new Drawer(viewer, () => renderer.request());

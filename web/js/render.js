@@ -69,6 +69,29 @@ export function splatsShown(t) {
   return n > 0 && p._numSplats === n && !!p._drawCommand;
 }
 
+/** Renderers that draw on the CPU (Chromium's SwiftShader, Mesa's llvmpipe and softpipe,
+ *  Windows' Basic Render Driver): there a frame of every splat costs seconds. */
+const SOFTWARE_RENDERER = /swiftshader|llvmpipe|softpipe|basic render driver/i;
+
+/** The name of WebGL context `gl`'s renderer, unmasked where the browser tells it ("" when
+ *  unknown). */
+export function rendererName(gl) {
+  if (!gl) return "";
+  const info = gl.getExtension("WEBGL_debug_renderer_info");
+  return String((info && gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) || gl.getParameter(gl.RENDERER) || "");
+}
+
+/** Multisampling for the viewer: the page's `?msaa=` value `param` (null when absent: "keep"
+ *  is Cesium's default, 1, 2, 4 or 8 that many samples) and otherwise none (1) on a software
+ *  renderer named `renderer`, where 4 samples make the splats' blending cost ~1.5 times as
+ *  much for edges a splat scene hardly has. Returns the sample count to set, or null to keep
+ *  Cesium's default. */
+export function msaaSamplesFor(param, renderer) {
+  if (param === "keep") return null;
+  if (param !== null && /^[1248]$/.test(param)) return Number(param);
+  return SOFTWARE_RENDERER.test(renderer) ? 1 : null;
+}
+
 export class RenderOnDemand {
   /** `tileset()` returns the tileset shown now (or null). */
   constructor(viewer, tileset) {
