@@ -3,16 +3,17 @@ the time from A to the auto rays and where it goes, and the operator's clicks pe
 the 3-D error of each method (the accuracy experiment's "auto" row).
 
     python benchmarks/autoaim.py [--data DIR] [--markers G1,B1,...] [--manual] [--out FILE]
-                                 [--at-once | --a-when-drawn] [--web DIR]
+                                 [--at-once | --a-at-once] [--web DIR]
 
 For each marker (default all 20 of gsgeo.demo.place.truth_points()): M, one real mouse click on
 the marker from one view (45 degrees up, 12 m, from outside the building) once that view is
 drawn (--at-once: as soon as the camera is set, so A also waits for the view's own frames), A
-(at once, or with --a-when-drawn once the frames the click asked are drawn);
-the page's
-window.gsgeo.autoaim.last gives the instants (ms from A) of the depth answer, the reference
-crop, the suggested views, each view drawn and matched, and the rays added. With >= 2 auto
-rays the point is stored (Enter, its id); its 3-D error against the truth is recorded.
+once the frames the click asked (its ray, the guide) are drawn, as an operator who sees the ray
+drawn before reaching for the key (--a-at-once: right after the click, so that A also waits for
+the click's own frames, each of every splat); the page's window.gsgeo.autoaim.last gives the
+instants (ms from A) of the depth answer, the reference crop, the suggested views, each view
+drawn and matched, and the rays added. With >= 2 auto rays the point is stored (Enter, its
+id); its 3-D error against the truth is recorded.
 --manual also measures each marker by hand: three clicks from three views (the workplace
 tests' procedure), then Enter. The figures are printed and, with --out, written as JSON.
 --web serves the viewer from another web/ directory (e.g. an older commit's, for A/B runs).
@@ -55,8 +56,8 @@ FINISH_JS = """() => { const c = document.createElement('canvas'); c.width = c.h
     g.getImageData(0, 0, 1, 1); }"""
 #: Whether a click waits for its view to be drawn (--at-once: no, as in the first version).
 SETTLE = True
-#: Whether A waits for the click's frames (the ray and the guide drawn): --a-when-drawn.
-A_SETTLE = False
+#: Whether A waits for the click's frames (the ray and the guide drawn); not with --a-at-once.
+A_SETTLE = True
 
 
 def click(page, t, az: float, el: float, rng: float, off) -> None:
@@ -69,12 +70,36 @@ def click(page, t, az: float, el: float, rng: float, off) -> None:
     page.mouse.click(a["x"], a["y"])
 
 
+#: The renderer's and the splat primitive's state, printed when a view never settles.
+STATE_JS = """() => { const r = gsgeo.renderer, t = gsgeo.tileset, p = t && t.gaussianSplatPrimitive,
+    C = Cesium, cam = gsgeo.viewer.camera;
+    const last = p && p._hasLastSteadySortCameraPosition ? {
+        moved_m: C.Cartesian3.distance(cam.positionWC, p._lastSteadySortCameraPosition),
+        turned_deg: C.Math.toDegrees(C.Cartesian3.angleBetween(cam.directionWC,
+                                                               p._lastSteadySortCameraDirection))} : null;
+    return {frames: r.frames, pending: r.pending, busy: r.busy(), moving: r.moving,
+            sorterState: p && p._sorterState, sorterPromise: !!(p && p._sorterPromise),
+            pendingSnapshot: !!(p && p._pendingSnapshot), rebuild: !!(p && p._needsSnapshotRebuild),
+            dirty: !!(p && p._dirty), numSplats: p && p._numSplats,
+            selected: t && t.statistics.numberOfPointsSelected, tilesLoaded: t && t.tilesLoaded,
+            instanceCount: p && p._drawCommand ? p._drawCommand.instanceCount : null,
+            lastSortFrame: p && p._lastSteadySortFrameNumber,
+            frameNumber: gsgeo.viewer.scene.frameState.frameNumber,
+            lastSort: last}; }"""
+
+
 def drawn(page, f0: int) -> None:
     """Wait until a frame after frame count `f0` is drawn and no more are asked or needed."""
     # (an older viewer, --web, has no settled(): no frame asked and none needed)
-    page.wait_for_function(f"gsgeo.renderer.frames > {f0} && (gsgeo.renderer.settled ? "
-                           "gsgeo.renderer.settled() : gsgeo.renderer.pending === 0 "
-                           "&& !gsgeo.renderer.busy())", timeout=90_000, polling=200)
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    try:
+        page.wait_for_function(f"gsgeo.renderer.frames > {f0} && (gsgeo.renderer.settled ? "
+                               "gsgeo.renderer.settled() : gsgeo.renderer.pending === 0 "
+                               "&& !gsgeo.renderer.busy())", timeout=90_000, polling=200)
+    except PlaywrightTimeout:
+        print(f"not settled: {json.dumps(page.evaluate(STATE_JS))}", flush=True)
+        raise
     # and drawn: a read of the canvas waits for the frames the page has sent to the GPU
     page.evaluate(FINISH_JS)
 
@@ -170,13 +195,14 @@ def main() -> None:
     ap.add_argument("--at-once", action="store_true",
                     help="click as soon as the camera is set, before its view is drawn (then A "
                          "waits for that view's frames)")
-    ap.add_argument("--a-when-drawn", action="store_true",
-                    help="press A once the frames the click asked (its ray, the guide) are drawn")
+    ap.add_argument("--a-at-once", action="store_true",
+                    help="press A right after the click, before the frames it asked (its ray, the "
+                         "guide) are drawn (by default A waits for them)")
     ap.add_argument("--web", type=Path, help="serve the viewer from this web/ directory (A/B runs)")
     args = ap.parse_args()
     global SETTLE, A_SETTLE
     SETTLE = not args.at_once
-    A_SETTLE = args.a_when_drawn and not args.at_once
+    A_SETTLE = not (args.a_at_once or args.at_once)
     from playwright.sync_api import TimeoutError as PlaywrightTimeout
     from playwright.sync_api import sync_playwright
 
