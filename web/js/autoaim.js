@@ -123,7 +123,6 @@ function setCamera(viewer, camera) {
  *  Nested calls leave them to the outer one, so that nothing changes between the views of
  *  one auto-aim (a change would ask for a frame). */
 let hidden = 0;
-const MSAA_OFF = !/[?&]msaa=keep/.test(location.search); // (A/B runs: ?msaa=keep)
 function hideExtras(ctx) {
   const scene = ctx.viewer.scene;
   if (hidden++ > 0) return () => { hidden--; };
@@ -131,13 +130,11 @@ function hideExtras(ctx) {
     .filter((x) => x && typeof x.show === "boolean");
   const shown = items.map((x) => x.show);
   for (const x of items) x.show = false;
-  // no multisampling either: the splats' fragments are drawn once instead of 4 times
-  const msaa = scene.msaaSamples;
-  if (MSAA_OFF && msaa > 1) scene.msaaSamples = 1;
+  // (multisampling is the viewer's choice, render.js's msaaSamplesFor: none on a software
+  // renderer, where it would cost the captures most)
   return () => {
     hidden--;
     items.forEach((x, i) => { x.show = shown[i]; });
-    if (scene.msaaSamples !== msaa) scene.msaaSamples = msaa;
   };
 }
 
