@@ -64,9 +64,12 @@ def click(page, t, az: float, el: float, rng: float, off) -> None:
     """Set the camera, wait until the view is drawn (an operator sees the feature before
     clicking it), click the marker's window position."""
     f0 = page.evaluate("gsgeo.renderer.frames")
+    t0 = time.perf_counter()
     a = page.evaluate(AIM_JS, [list(t.ecef), az, el, rng, off])
     if SETTLE:
         drawn(page, f0)
+        print(f"{t.id}: the view drawn {time.perf_counter() - t0:.1f} s after the camera was set",
+              flush=True)
     page.mouse.click(a["x"], a["y"])
 
 
@@ -143,6 +146,7 @@ def summary(r: dict) -> str:
 
 
 def auto_point(page, t) -> dict:
+    start = time.perf_counter()
     page.keyboard.press("m")
     page.wait_for_selector("#measure-panel:not([hidden])")
     f0 = page.evaluate("gsgeo.renderer.frames")
@@ -165,6 +169,8 @@ def auto_point(page, t) -> dict:
     else:
         page.keyboard.press("Escape")
         page.wait_for_selector("#measure-panel", state="hidden")
+    out["point_s"] = time.perf_counter() - start
+    print(f"{t.id}: {out['point_s']:.1f} s for the point, M to stored (or Esc)", flush=True)
     return out
 
 

@@ -278,9 +278,8 @@ def test_shifted_model_matrix_stores_georeferenced_point(server, browser, projec
         rec = stored["record"]
         assert abs(rec["easting"] - e) < 0.005 and abs(rec["height"] - h) < 0.005
         # the marker of the stored point is drawn where the tileset is now rendered
-        drawn = p.page.evaluate(f"""() => {{
-            const e = gsgeo.viewer.dataSources.get(0).entities.getById('pt:{stored["id"]}');
-            const q = e.position.getValue(gsgeo.viewer.clock.currentTime); return [q.x, q.y, q.z]; }}""")
+        drawn = p.page.evaluate(f"""() => gsgeo.draw.overlay.markers('points')
+            .find((m) => m.id === '{stored["id"]}').position""")
         assert np.linalg.norm(np.array(drawn) - rendered) < 0.005
         # reopen: exclude ray 1 and bring it back from the point's detail panel
         row = f"#points-table tbody tr[data-id='{stored['id']}']"

@@ -24,6 +24,7 @@ import { currentCamera, project, requestDepth } from "./guide.js";
 import { add, norm, scale } from "./linalg.js";
 import { captureRay } from "./rays.js";
 import { holdSplats, splatsHoldable } from "./render.js";
+import { hideScenery } from "./still.js";
 
 const Cesium = window.Cesium;
 
@@ -116,28 +117,6 @@ function setCamera(viewer, camera) {
     orientation: { direction: c3(camera.direction), up: c3(camera.up) } });
 }
 
-/** Hide the measuring graphics, the globe and the sky (they would cover the feature or cost
- *  time: the sky's atmosphere alone is ~0.6 s of a frame in a software renderer, more than
- *  the splats of a small crop; the crops' background is then the scene's background colour,
- *  in the reference and the targets alike); returns the function that shows them again.
- *  Nested calls leave them to the outer one, so that nothing changes between the views of
- *  one auto-aim (a change would ask for a frame). */
-let hidden = 0;
-function hideExtras(ctx) {
-  const scene = ctx.viewer.scene;
-  if (hidden++ > 0) return () => { hidden--; };
-  const items = [ctx.draw.ds, scene.globe, scene.skyAtmosphere, scene.skyBox, scene.sun, scene.moon]
-    .filter((x) => x && typeof x.show === "boolean");
-  const shown = items.map((x) => x.show);
-  for (const x of items) x.show = false;
-  // (multisampling is the viewer's choice, render.js's msaaSamplesFor: none on a software
-  // renderer, where it would cost the captures most)
-  return () => {
-    hidden--;
-    items.forEach((x, i) => { x.show = shown[i]; });
-  };
-}
-
 /** Render at `camera` until a frame shows the splats sorted and drawn for it, without the
  *  measuring graphics (rays, markers: they would sit on the feature) and the globe, and return
  *  the crops `boxes()` gives of that frame (canvases) and the number of frames it took. The
@@ -156,7 +135,7 @@ function captureAt(ctx, camera, boxes) {
   const { viewer } = ctx;
   const scene = viewer.scene;
   setCamera(viewer, camera);
-  const restore = hideExtras(ctx);
+  const restore = hideScenery(scene);
   const t = ctx.state.tileset;
   const p = t && t.gaussianSplatPrimitive;
   let muted = null;
@@ -217,7 +196,7 @@ function captureHeld(ctx, hold, camera, boxes) {
   const { viewer } = ctx;
   const scene = viewer.scene;
   setCamera(viewer, camera);
-  const restore = hideExtras(ctx);
+  const restore = hideScenery(scene);
   const canvas = scene.canvas;
   let splats = 0;
   try {
@@ -274,9 +253,22 @@ export function rememberReference(ctx, ray) {
   const camera = cameras.get(ray) || currentCamera(ctx.viewer);
   if (!camera || !ray.pixel || references.has(ray)) return;
   cameras.set(ray, camera);
+  const back = awayFromView(ctx);
   const p = captureReference(ctx, ray, camera);
-  p.catch(() => references.delete(ray)); // asked again on A
+  p.catch(() => references.delete(ray)).finally(back); // asked again on A
   references.set(ray, p);
+}
+
+/** The scene canvas is about to show other frames than the operator's view (auto-aim's crops):
+ *  put up the still of the view (still.js) and keep it; returns the function to call when
+ *  done, which asks for a frame of the view when there was no still to keep it. */
+function awayFromView(ctx) {
+  const still = ctx.still;
+  const kept = still && still.take() ? still.keep() : null;
+  return () => {
+    if (kept) kept();
+    else ctx.viewer.scene.requestRender();
+  };
 }
 
 /** The ray (session JSON, marked auto) through window position `pixel` of view `camera`. */
@@ -365,6 +357,7 @@ export async function autoAim(ctx, changed = () => {}) {
   let moved = false;
   let restore = null;
   let held = null;
+  const back = awayFromView(ctx);
   try {
     // held from now on: a frame still asked for the operator's view (the click's ray drawn)
     // draws none of the splats instead of all of them
@@ -397,7 +390,7 @@ export async function autoAim(ctx, changed = () => {}) {
     const near = add(ray1.origin, scale(d, depth.near_m));
     const far = add(ray1.origin, scale(d, depth.far_m));
     const matches = [];
-    restore = hideExtras(ctx);
+    restore = hideScenery(viewer.scene);
     // the splats stay held across the views: no sort of all of them, no full frame between
     if (!held) held = holdSplats(state.tileset);
     for (let i = 0; i < views.length; i++) {
@@ -450,7 +443,7 @@ export async function autoAim(ctx, changed = () => {}) {
     if (restore) restore();
     if (moved && home) setCamera(viewer, home);
     if (held) held.release(viewer.camera);
-    viewer.scene.requestRender();
+    back();
     window.gsgeo.autoaim = { last: { ...timings, added: result.added, declined: declined.map((x) => x.reason), text: result.text }, images };
     if (state.measure === m) changed(result.added > 0);
     ctx.updateStatus();

@@ -38,73 +38,46 @@ export function ellipsoidAxes(cov, k) {
 }
 
 export class Drawer {
-  /** `changed()` is called whenever what is drawn changes (the page renders on demand). */
-  constructor(viewer, changed = () => {}) {
+  /** Everything is drawn on the 2-D overlay (overlay.js): a change repaints it without a frame
+   *  of the scene where the camera still shows what was drawn. `requestFrame()` asks for a
+   *  frame otherwise; `fixedView()` is the view a still shows (still.js), else null. */
+  constructor(viewer, { requestFrame = null, fixedView = () => null } = {}) {
     this.viewer = viewer;
-    this.changed = changed;
-    this.ds = new Cesium.CustomDataSource("gsgeo");
-    viewer.dataSources.add(this.ds);
-    this.groups = new Map();
-    this.overlay = new Overlay(viewer, document.getElementById("viewer-wrap"), document.getElementById("status"));
-    this.overlay.changed = changed;
+    this.overlay = new Overlay(viewer, document.getElementById("viewer-wrap"), document.getElementById("status"), fixedView);
+    if (requestFrame) this.overlay.requestFrame = requestFrame;
     this.trueSize = false; // ellipsoids at true size, else exaggerated to be seen (ellipsoid())
     this.ellipsoids = new Map(); // group -> what ellipsoid() drew last, for the on-screen badge
   }
 
   clear(group) {
-    const list = this.groups.get(group) || [];
-    for (const e of list) this.ds.entities.remove(e);
-    this.groups.set(group, []);
     this.overlay.clear(group);
     if (this.ellipsoids.delete(group)) this.badge();
-    this.changed();
   }
 
-  add(group, options) {
-    const e = this.ds.entities.add(options);
-    if (!this.groups.has(group)) this.groups.set(group, []);
-    this.groups.get(group).push(e);
-    this.changed();
-    return e;
-  }
-
+  /** Run `fn`, which draws (the overlay is painted once, after it). */
   batch(fn) {
-    this.ds.entities.suspendEvents();
-    try { fn(); } finally { this.ds.entities.resumeEvents(); }
+    fn();
   }
 
-  /** A ray from `origin` along unit `direction` for `len` metres (rendered ECEF). */
+  /** A ray from `origin` along unit `direction` for `len` metres (rendered ECEF), its origin
+   *  marked and labelled `label` (or not labelled when null). */
   ray(group, origin, direction, len, color, label) {
     const end = [origin[0] + direction[0] * len, origin[1] + direction[1] * len,
       origin[2] + direction[2] * len];
-    this.overlay.add(group, [origin, end], { color: color.toCssColorString(), width: 2 });
-    this.add(group, {
-      position: cart(origin),
-      point: { pixelSize: 6, color, outlineColor: Cesium.Color.BLACK, outlineWidth: 1,
-        disableDepthTestDistance: Number.POSITIVE_INFINITY },
-      label: label ? {
-        text: label, font: "12px sans-serif", fillColor: color, outlineColor: Cesium.Color.BLACK,
-        outlineWidth: 3, style: Cesium.LabelStyle.FILL_AND_OUTLINE, pixelOffset: new Cesium.Cartesian2(6, -6),
-        horizontalOrigin: Cesium.HorizontalOrigin.LEFT, verticalOrigin: Cesium.VerticalOrigin.BOTTOM,
-        disableDepthTestDistance: Number.POSITIVE_INFINITY,
-      } : undefined,
-    });
+    const css = color.toCssColorString();
+    this.overlay.add(group, [origin, end], { color: css, width: 2 });
+    this.overlay.marker(group, origin, { size: 6, color: css, outline: 1, label: label || null,
+      font: "12px sans-serif", labelColor: css });
   }
 
-  /** A point marker with its id; `id` becomes the entity id "pt:<id>" for picking. */
+  /** A point marker labelled with its id `id` (overlay.markers(group) lists them). */
   marker(group, id, position, color, size = 9) {
-    return this.add(group, {
-      id: group === "points" ? `pt:${id}` : undefined,
-      position: cart(position),
-      point: { pixelSize: size, color, outlineColor: Cesium.Color.BLACK, outlineWidth: 1.5,
-        disableDepthTestDistance: Number.POSITIVE_INFINITY },
-      label: {
-        text: id, font: "bold 13px sans-serif", fillColor: Cesium.Color.WHITE,
-        outlineColor: Cesium.Color.BLACK, outlineWidth: 3, style: Cesium.LabelStyle.FILL_AND_OUTLINE,
-        pixelOffset: new Cesium.Cartesian2(8, -6), horizontalOrigin: Cesium.HorizontalOrigin.LEFT,
-        verticalOrigin: Cesium.VerticalOrigin.BOTTOM, disableDepthTestDistance: Number.POSITIVE_INFINITY,
-      },
-    });
+    this.overlay.marker(group, position, { id, size, color: color.toCssColorString(), outline: 1.5, label: id });
+  }
+
+  /** A ring of `size` px around `position` (rendered ECEF): the solution of the point measured. */
+  ring(group, position, color, size = 14) {
+    this.overlay.marker(group, position, { size, color: "transparent", outline: 2, ring: color.toCssColorString() });
   }
 
   /** The error ellipsoid of a point: georeferenced ECEF point and covariance (m^2), drawn through
@@ -139,7 +112,6 @@ export class Drawer {
     }
     this.ellipsoids.set(group, { ...info, k });
     this.badge();
-    this.changed();
     return info;
   }
 

@@ -2,8 +2,8 @@
 // epipolar line with the segment where the feature can lie (near..far of the scene's splats
 // along the ray, from POST /api/scenes/{scene}/depth), the first ray's depth hint as a
 // provisional point, and from two rays the predicted pixel of the solution with its 95 %
-// error ellipse. Drawn on the measuring overlay's 2-D canvas after every render (so after
-// every camera change) and exposed as window.gsgeo.guide.
+// error ellipse. Painted with the measuring overlay's 2-D canvas (after every frame, so after
+// every camera change, and when only the drawing changed) and exposed as window.gsgeo.guide.
 //
 // Frames: rays and depth points are in rendered ECEF (metres); the solution's point_ecef and
 // cov_ecef are carried into it by the tileset's current modelMatrix. Window coordinates are
@@ -127,7 +127,7 @@ export function requestDepth(ctx, ray) {
   const p = api("POST", `/scenes/${encodeURIComponent(scene)}/depth`, { ray })
     .then((res) => { depths.set(ray, res); return res; })
     .catch(() => { depths.set(ray, null); return null; }) // not asked again
-    .finally(() => { pending.delete(ray); refresh(ctx.viewer); });
+    .finally(() => { pending.delete(ray); refresh(ctx); });
   pending.set(ray, p);
   return p;
 }
@@ -231,13 +231,15 @@ function paint(g, gd) {
   }
 }
 
-/** Ask for a new frame (the viewer may render on demand only). */
-export function refresh(viewer) {
-  if (viewer && viewer.scene) viewer.scene.requestRender();
+/** The guide changed (a depth answer came): paint the overlay again (overlay.js: without a
+ *  frame of the scene while the camera stands still). */
+export function refresh(ctx) {
+  if (ctx && ctx.draw) ctx.draw.overlay.repaint();
 }
 
-/** Install the guide: drawn on `overlay`'s canvas after each render (after the overlay's own
- *  drawing), exposed as window.gsgeo.guide (computed for the camera of that moment). */
+/** Install the guide: painted on `overlay`'s canvas whenever it is painted (after its own
+ *  drawing, for the view the scene canvas shows), exposed as window.gsgeo.guide (computed for
+ *  the camera of that moment). */
 export function installGuide(ctx, overlay) {
   const reach = (origin) => {
     const ts = ctx.state.tileset;
@@ -247,14 +249,9 @@ export function installGuide(ctx, overlay) {
   };
   const now = () => compute(ctx.state.measure, currentCamera(ctx.viewer), ctx.modelMatrix(), reach);
   Object.defineProperty(window.gsgeo, "guide", { get: now, configurable: true });
-  ctx.viewer.scene.postRender.addEventListener(() => {
+  overlay.onPaint((g, view) => {
     const m = ctx.state.measure;
     if (!m || !m.rays.length) return;
-    const g = overlay.ctx;
-    const dpr = window.devicePixelRatio || 1;
-    g.save();
-    g.setTransform(dpr, 0, 0, dpr, 0, 0);
-    paint(g, now());
-    g.restore();
+    paint(g, compute(m, view, ctx.modelMatrix(), reach));
   });
 }

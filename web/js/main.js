@@ -12,8 +12,9 @@ import { georefPanel } from "./georef.js";
 import { buildingsPanel } from "./buildings.js";
 import { georefVersion, moveCamera } from "./similarity.js";
 import { tileFailureText } from "./scenehost.js";
-import { RenderOnDemand, msaaSamplesFor, rendererName, splatsShown } from "./render.js";
+import { RenderOnDemand, isSoftwareRenderer, msaaSamplesFor, rendererName, splatsShown } from "./render.js";
 import { installGuide } from "./guide.js";
+import { Still } from "./still.js";
 import { nextView } from "./views.js";
 
 const Cesium = window.Cesium;
@@ -62,6 +63,8 @@ const viewer = new Cesium.Viewer("cesium", {
   infoBox: false,
   selectionIndicator: false,
   terrainProvider: new Cesium.EllipsoidTerrainProvider(),
+  // the last frame stays readable: still.js copies it to show while auto-aim draws elsewhere
+  contextOptions: { webgl: { preserveDrawingBuffer: true } },
 });
 viewer.scene.globe.baseColor = Cesium.Color.fromCssColorString("#3a4046");
 viewer.scene.globe.showGroundAtmosphere = false;
@@ -69,21 +72,28 @@ viewer.scene.fog.enabled = false;
 viewer.cesiumWidget.screenSpaceEventHandler.removeInputAction(Cesium.ScreenSpaceEventType.LEFT_CLICK);
 viewer.cesiumWidget.screenSpaceEventHandler.removeInputAction(Cesium.ScreenSpaceEventType.LEFT_DOUBLE_CLICK);
 // no multisampling on a software renderer (render.js's msaaSamplesFor; ?msaa= overrides)
-{
+const glRenderer = (() => {
   const canvas = viewer.scene.canvas; // its WebGL context is Cesium's: getContext returns it
-  const samples = msaaSamplesFor(new URLSearchParams(location.search).get("msaa"),
-    rendererName(canvas.getContext("webgl2") || canvas.getContext("webgl")));
+  return rendererName(canvas.getContext("webgl2") || canvas.getContext("webgl"));
+})();
+{
+  const samples = msaaSamplesFor(new URLSearchParams(location.search).get("msaa"), glRenderer);
   if (samples !== null) viewer.scene.msaaSamples = samples;
 }
 // the scene is drawn on demand (render.js): what changes the drawing asks for a frame
 const renderer = new RenderOnDemand(viewer, () => state.tileset);
-const draw = new Drawer(viewer, () => renderer.request());
+// the operator's view kept as a still while auto-aim draws its views (still.js)
+const still = new Still(viewer, renderer, () => state.tileset, $("#viewer-wrap"), $("#status"));
+still.software = isSoftwareRenderer(glRenderer);
+// the measuring graphics: a 2-D overlay, painted without a frame when only they change
+const draw = new Drawer(viewer, { requestFrame: () => renderer.request(), fixedView: () => still.shown() });
 
 window.gsgeo = {
   viewer,
   Cesium,
   draw,
   renderer,
+  still,
   get tileset() { return state.tileset; },
   get state() { return state; },
   /** the loaded tileset's georeference version (extras.gsgeo.georef.version, 0 when absent) */
@@ -475,7 +485,7 @@ function confScale() { return state.conf === "95" ? SCALE_95_3D : 1; }
 /** What the tools (tools/*.js) may use of the workplace. pointStored(pt, oldId) and
  *  featureStored(f) take the server's answer to a store; done() returns to the default tool. */
 const ctx = {
-  state, viewer, draw, message, fail, modelMatrix, solveSettings, confScale,
+  state, viewer, draw, still, message, fail, modelMatrix, solveSettings, confScale,
   pointById, nearestPoint, selectPoint, updateStatus, pointStored, featureStored,
   buildingStored: (b) => buildings.stored(b),
   georefVersion: currentGeorefVersion,

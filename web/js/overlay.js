@@ -1,40 +1,114 @@
-// A 2-D canvas over the Cesium canvas for rays, error ellipsoids, lines and polygons.
-// CesiumJS 1.145 hides entity polylines wherever Gaussian splats are drawn, so these
-// measuring graphics are projected by the camera here and drawn on top, every frame. The
-// page renders on demand: `changed()` (set by the owner) is called when the drawing changes.
+// A 2-D canvas over the Cesium canvas for rays, point markers, error ellipsoids, lines and
+// polygons. CesiumJS 1.145 hides entity polylines wherever Gaussian splats are drawn, so these
+// measuring graphics are projected by the camera here and drawn on top: after every frame, and
+// without a frame when only the drawing changed (repaint), since a WebGL frame draws every
+// splat (seconds in a software renderer) and a click changes nothing of the scene itself.
+//
+// Frames: points in rendered ECEF (metres); window coordinates are Cesium's, CSS pixels from
+// the canvas' top-left corner, x right, y down.
 
 const Cesium = window.Cesium;
 
+/** The view a frame is drawn from: Cesium's view matrix (column-major array, rendered ECEF ->
+ *  camera), the camera's position, unit direction and up (rendered ECEF), vertical field of
+ *  view (rad) and the canvas size (CSS px); null when the frustum is not perspective. */
+export function viewOf(viewer) {
+  const cam = viewer.camera;
+  if (!(cam.frustum instanceof Cesium.PerspectiveFrustum)) return null;
+  const arr = (c) => [c.x, c.y, c.z];
+  const canvas = viewer.scene.canvas;
+  return { matrix: Cesium.Matrix4.toArray(cam.viewMatrix), position: arr(cam.positionWC),
+    direction: arr(cam.directionWC), up: arr(cam.upWC), fovy: cam.frustum.fovy,
+    near: cam.frustum.near, width: canvas.clientWidth, height: canvas.clientHeight };
+}
+
+/** Whether views `a` and `b` (viewOf) draw the same picture: the same canvas size and field
+ *  of view, and poses within 0.1 mm and 1e-7 rad (a camera set back where it was). */
+export function sameView(a, b) {
+  if (!a || !b || a.width !== b.width || a.height !== b.height || Math.abs(a.fovy - b.fovy) > 1e-12) return false;
+  for (let i = 0; i < 16; i++) {
+    const tol = i >= 12 ? 1e-4 : 1e-7;
+    if (!(Math.abs(a.matrix[i] - b.matrix[i]) <= tol)) return false;
+  }
+  return true;
+}
+
 export class Overlay {
-  constructor(viewer, container, before = null) {
+  /** `fixedView()` returns the view the scene canvas shows while it is not the camera's (a still
+   *  of the operator's view while auto-aim draws elsewhere: still.js), else null. */
+  constructor(viewer, container, before = null, fixedView = () => null) {
     this.viewer = viewer;
     this.canvas = document.createElement("canvas");
     this.canvas.className = "gsgeo-overlay";
     container.insertBefore(this.canvas, before);
     this.ctx = this.canvas.getContext("2d");
     this.groups = new Map();
-    this.changed = () => {};
-    this.view = new Cesium.Matrix4();
-    viewer.scene.postRender.addEventListener(() => this.draw());
+    this.painters = [];
+    this.fixedView = fixedView;
+    this.requestFrame = () => viewer.scene.requestRender();
+    this.shown = null; // the view of the scene canvas' last frame (viewOf)
+    this.painted = null; // the view the overlay was last painted for
+    this.queued = false;
+    viewer.scene.postRender.addEventListener(() => {
+      const fixed = this.fixedView();
+      if (!fixed) this.shown = viewOf(viewer);
+      this.draw(fixed || this.shown);
+    });
   }
 
   clear(group) {
     this.groups.set(group, []);
-    this.changed();
+    this.repaint();
   }
 
   /** Add a 3-D polyline: points [[x, y, z], ...] in rendered ECEF (m); style {color, width, dash,
    *  closed, fill}: with `fill` (a CSS colour) a closed planar ring is filled, farthest first. */
   add(group, points, style) {
-    if (!this.groups.has(group)) this.groups.set(group, []);
-    this.groups.get(group).push({ points, ...style });
-    this.changed();
+    this.item(group, { points, ...style });
   }
 
-  draw() {
-    const sceneCanvas = this.viewer.scene.canvas;
-    const w = sceneCanvas.clientWidth;
-    const h = sceneCanvas.clientHeight;
+  /** Add a point marker at `position` (rendered ECEF, m), drawn over everything: a disc of
+   *  `size` px (`color`, a CSS colour; "transparent" for a ring) with a black outline of
+   *  `outline` px (`ring`: a CSS colour for the outline instead), and `label` beside it
+   *  (`font`, `labelColor`); `id` names it (markers(group) lists them). */
+  marker(group, position, { size = 9, color, outline = 1.5, ring = null, label = null, font = "bold 13px sans-serif",
+    labelColor = "#ffffff", id = null } = {}) {
+    this.item(group, { marker: true, position, size, color, outline, ring, label, font, labelColor, id });
+  }
+
+  item(group, it) {
+    if (!this.groups.has(group)) this.groups.set(group, []);
+    this.groups.get(group).push(it);
+    this.repaint();
+  }
+
+  /** The markers of `group`: [{id, position}]. */
+  markers(group) {
+    return (this.groups.get(group) || []).filter((s) => s.marker).map((s) => ({ id: s.id, position: s.position }));
+  }
+
+  /** `fn(ctx2d, view)` paints more after the overlay's own drawing (CSS px, view: viewOf). */
+  onPaint(fn) {
+    this.painters.push(fn);
+  }
+
+  /** The drawing changed: paint it again now for the view the scene canvas shows, when that is
+   *  still the camera's; otherwise ask for a frame, which paints it after drawing the scene. */
+  repaint() {
+    if (this.queued) return; // once for all the changes made by the code running now
+    this.queued = true;
+    queueMicrotask(() => {
+      this.queued = false;
+      const shown = this.fixedView() || this.shown;
+      if (shown && sameView(shown, viewOf(this.viewer))) this.draw(shown);
+      else this.requestFrame();
+    });
+  }
+
+  /** Paint everything for view `view` (viewOf; nothing when null). */
+  draw(view) {
+    const w = view ? view.width : this.viewer.scene.canvas.clientWidth;
+    const h = view ? view.height : this.viewer.scene.canvas.clientHeight;
     const dpr = window.devicePixelRatio || 1;
     if (this.canvas.width !== Math.round(w * dpr) || this.canvas.height !== Math.round(h * dpr)) {
       this.canvas.width = Math.round(w * dpr);
@@ -45,12 +119,11 @@ export class Overlay {
     const ctx = this.ctx;
     ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     ctx.clearRect(0, 0, w, h);
-    const camera = this.viewer.camera;
-    const frustum = camera.frustum;
-    if (!(frustum instanceof Cesium.PerspectiveFrustum)) return;
-    const f = h / (2 * Math.tan(frustum.fovy / 2));
-    const near = Math.max(frustum.near, 1e-3);
-    const m = Cesium.Matrix4.toArray(camera.viewMatrix);
+    this.painted = view;
+    if (!view) return;
+    const f = h / (2 * Math.tan(view.fovy / 2));
+    const near = Math.max(view.near, 1e-3);
+    const m = view.matrix;
     const toView = (p) => [
       m[0] * p[0] + m[4] * p[1] + m[8] * p[2] + m[12],
       m[1] * p[0] + m[5] * p[1] + m[9] * p[2] + m[13],
@@ -71,7 +144,7 @@ export class Overlay {
       ctx.fill();
     }
     for (const s of all) {
-      if (s.fill && !s.color) continue;
+      if (s.marker || (s.fill && !s.color)) continue;
       const pts = s.points.map(toView);
       if (s.closed && pts.length > 2) pts.push(pts[0]);
       ctx.beginPath();
@@ -99,6 +172,53 @@ export class Overlay {
       ctx.lineWidth = s.width || 2;
       ctx.stroke();
     }
+    ctx.setLineDash([]);
+    // markers over the lines (as Cesium's point entities with depth test off were)
+    for (const s of all) {
+      if (!s.marker) continue;
+      const v = toView(s.position);
+      if (v[2] > -near) continue;
+      const [x, y] = toScreen(v);
+      paintMarker(ctx, x, y, s);
+    }
+    for (const fn of this.painters) {
+      ctx.save();
+      fn(ctx, view);
+      ctx.restore();
+    }
+  }
+}
+
+/** A marker at window position x, y (see Overlay.marker). */
+function paintMarker(ctx, x, y, s) {
+  const r = s.size / 2;
+  ctx.beginPath();
+  ctx.arc(x, y, r, 0, 2 * Math.PI);
+  if (s.color && s.color !== "transparent") {
+    ctx.fillStyle = s.color;
+    ctx.fill();
+  }
+  if (s.ring) {
+    ctx.lineWidth = s.outline;
+    ctx.strokeStyle = s.ring;
+    ctx.stroke();
+  } else if (s.outline > 0) {
+    ctx.lineWidth = s.outline;
+    ctx.strokeStyle = "#000000";
+    ctx.stroke();
+  }
+  if (s.label) {
+    ctx.font = s.font;
+    ctx.textAlign = "left";
+    ctx.textBaseline = "bottom";
+    const lx = x + r + 4;
+    const ly = y - 4;
+    ctx.lineJoin = "round";
+    ctx.lineWidth = 3;
+    ctx.strokeStyle = "#000000";
+    ctx.strokeText(s.label, lx, ly);
+    ctx.fillStyle = s.labelColor;
+    ctx.fillText(s.label, lx, ly);
   }
 }
 

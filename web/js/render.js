@@ -9,8 +9,8 @@
 // that draws nothing new: none while the worker sorts, and a finished sort is committed between
 // frames (adoptSort) so that the one frame asked then draws it.
 
-/** Frames rendered after an explicit request's own: none, as the entities (points, labels)
- *  added are updated by the clock tick that precedes the frame asked. */
+/** Frames rendered after an explicit request's own: none (the measuring graphics are on the
+ *  2-D overlay, painted after the frame asked). */
 const EXTRA_FRAMES = 0;
 
 /** CesiumJS 1.145's GaussianSplatSortingState (a private enum of GaussianSplatPrimitive). */
@@ -34,6 +34,32 @@ export function splatsBusy(t) {
   if (p._sorterState !== undefined && p._sorterState !== SORT_IDLE) return true;
   // no command yet, or one muted by SplatHold.release until the next sort
   return p._numSplats > 0 && (!p._drawCommand || p._drawCommand.instanceCount === 0);
+}
+
+/** Whether the frame just drawn drew every splat of tileset `t` (not held, not muted). */
+function drawsAll(t) {
+  const p = t && t.show && t.gaussianSplatPrimitive;
+  return !!p && !holds.has(p) && !!p._drawCommand && p._drawCommand.instanceCount > 0;
+}
+
+/** CesiumJS asks for a frame after the next one whenever a web worker finishes a task (the
+ *  scene's listener of TaskProcessor.taskCompletedEvent). When the task is the sort of the
+ *  splats, that frame draws every splat once more for nothing: the postUpdate above asks the
+ *  frame the sort needs (adoptSort). The scene's listener is replaced by one that leaves out
+ *  the completions that come while tileset `tileset()`'s splats are being sorted. CesiumJS
+ *  1.145 (pinned): the listener's remover is the scene's private
+ *  _removeTaskProcessorListenerCallback (revisit on a Cesium upgrade). */
+function dropSortCompletionFrames(scene, tileset) {
+  const C = window.Cesium;
+  const event = C && C.TaskProcessor && C.TaskProcessor.taskCompletedEvent;
+  if (!event || typeof scene._removeTaskProcessorListenerCallback !== "function") return;
+  scene._removeTaskProcessorListenerCallback();
+  scene._removeTaskProcessorListenerCallback = event.addEventListener(() => {
+    const t = tileset();
+    const p = t && t.show && t.gaussianSplatPrimitive;
+    if (p && p._sorterState === SORT_SORTING) return;
+    scene.frameState.afterRender.push(() => { scene.requestRender(); });
+  });
 }
 
 /** Whether a sort of tileset `t`'s splats is under way or waits to be committed. */
@@ -81,6 +107,11 @@ export function rendererName(gl) {
   return String((info && gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) || gl.getParameter(gl.RENDERER) || "");
 }
 
+/** Whether the renderer named `renderer` (rendererName) draws on the CPU. */
+export function isSoftwareRenderer(renderer) {
+  return SOFTWARE_RENDERER.test(renderer);
+}
+
 /** Multisampling for the viewer: the page's `?msaa=` value `param` (null when absent: "keep"
  *  is Cesium's default, 1, 2, 4 or 8 that many samples) and otherwise none (1) on a software
  *  renderer named `renderer`, where 4 samples make the splats' blending cost ~1.5 times as
@@ -98,13 +129,19 @@ export class RenderOnDemand {
     this.viewer = viewer;
     this.tileset = tileset;
     this.pending = 0;
+    this.waits = [];
     this.frames = 0; // frames rendered since the page started (tests count them)
+    this.framesOfAll = 0; // those of them that drew every splat (seconds each in software)
     const scene = viewer.scene;
     scene.requestRenderMode = true;
     // nothing in the scene depends on simulation time
     scene.maximumRenderTimeChange = Number.POSITIVE_INFINITY;
     this.moving = false;
-    scene.postRender.addEventListener(() => { this.frames++; });
+    dropSortCompletionFrames(scene, () => this.tileset());
+    scene.postRender.addEventListener(() => {
+      this.frames++;
+      if (drawsAll(this.tileset())) this.framesOfAll++;
+    });
     viewer.camera.moveStart.addEventListener(() => { this.moving = true; });
     viewer.camera.moveEnd.addEventListener(() => { this.moving = false; });
     // a frame about to be drawn for a new pose (a jump, the end of a flight) starts the sort
@@ -135,7 +172,14 @@ export class RenderOnDemand {
    *  for the camera (the operator sees the scene as it is). */
   settled() {
     const t = this.tileset();
-    return this.pending === 0 && !this.busy() && !sortPending(t) && !needsSort(t, this.viewer.camera);
+    return this.pending === 0 && !this.busy() && !sortPending(t) && !needsSort(t, this.viewer.camera)
+      && !this.waits.some((w) => w());
+  }
+
+  /** `fn()` tells whether the view waits for something else before it is drawn as it will
+   *  stay (still.js: the splats held back until the globe has loaded). */
+  waitFor(fn) {
+    this.waits.push(fn);
   }
 
   /** Something drawn changed: render now and `extra` frames more. */

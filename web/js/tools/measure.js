@@ -7,7 +7,7 @@
 // stored with the georeference version of the tileset its first ray was taken in.
 
 import { api } from "../api.js";
-import { COLORS, cart } from "../draw.js";
+import { COLORS } from "../draw.js";
 import { $, fixed, h, mm } from "../format.js";
 import { applyPoint, norm, sub } from "../linalg.js";
 import { captureRay, raysInCurrentFrame } from "../rays.js";
@@ -15,8 +15,6 @@ import { nextPointId } from "../pointid.js";
 import { closeIdPrompt, idError, idPromptOpen, openIdPrompt, promptedId } from "../idprompt.js";
 import { hitsNothing, refresh as refreshGuide, requestDepth } from "../guide.js";
 import { autoAim, autoAimPanel, autoAimResult, rayBadge, rememberReference } from "../autoaim.js";
-
-const Cesium = window.Cesium;
 
 /** What to say about ray i (0-based) of `m` that hits no splat: how to get rid of it. */
 function noHitText(m, i) {
@@ -145,17 +143,13 @@ function draw(ctx) {
     });
     if (res) {
       ell = drawer.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, ctx.confScale());
-      drawer.add("current", {
-        position: cart(pRendered),
-        point: { pixelSize: 14, color: Cesium.Color.TRANSPARENT, outlineColor: COLORS.solution, outlineWidth: 2,
-          disableDepthTestDistance: Number.POSITIVE_INFINITY },
-      });
+      drawer.ring("current", pRendered, COLORS.solution);
     }
   });
   $("#ellipsoid-note").textContent = res ? ellipsoidNote(state.conf, ell) : "";
   // the epipolar guide (guide.js) needs each ray's depth; it draws itself after the render
   for (const ray of m.rays) requestDepth(ctx, ray);
-  refreshGuide(ctx.viewer);
+  refreshGuide(ctx);
 }
 
 function end(ctx) {
