@@ -1,21 +1,22 @@
-"""Auto-aim (key A) in a real browser on the demo scene (`gsgeo demo`): one real mouse click on
-a marker from one view, A, and Enter (the ID prompt answered with the marker's id) store a
-point, or auto-aim declines with a reason.
+"""Auto-aim (key A) in a real browser on the demo scene (`gsgeo demo`): for every one of the 20
+demo markers, one real mouse click on the marker in one view, A, and Enter (the ID prompt
+answered with the marker's id) store a point, or auto-aim declines with a reason (issue 20).
 
 Truth: gsgeo.demo.place.truth_points() (the demo's analytic markers carried to ECEF by PROJ),
 independent of the viewer. The click goes to the marker's window position as the pinhole of
 the contract projects it (AIM_JS, checked against Cesium's pick ray).
 
-Two markers, for the suite's time (each A draws four views in SwiftShader, each one frame of
-the splats that reach its crop: 5-20 s a marker on this machine): a ground target (G1), which
-auto-aim finds in its suggested views and stores within 3 cm with >= 3 rays, and a pole top
-(T1), where it must not store a point more than 10 cm off and names every declined view with
-its reason. The sweep over all 20 markers (issue 20's ">= 15 of 20") is benchmarks/autoaim.py's,
-with its figures in benchmarks/README.md (2026-11-28: 17 of 20 stored within 3 cm with >= 3
-rays; T1, T2 and T3 declined with their reasons).
+The markers are clicked from 17 camera stations (S1-S4 share one view, as a surveyor measures
+every target in sight before moving on): each station costs one or two frames of every splat
+(seconds each in SwiftShader), and everything done on a standing camera (the click, auto-aim's
+four views, each drawn as one frame of only the splats reaching its crop, Enter) costs none,
+which the sweep checks at every station, with the still the operator sees meanwhile pixel for
+pixel the view's last frame.
 """
 
 from __future__ import annotations
+
+import time
 
 import numpy as np
 import pytest
@@ -32,6 +33,14 @@ VIEWPORT = {"width": 1280, "height": 720}
 #: elevation (degrees), range (m), look offset (ENU m) so that the marker is off the centre.
 ELEVATION, RANGE, OFFSET = 45.0, 12.0, [0.4, -0.3, 0.0]
 WITHIN_M, WRONG_M = 0.03, 0.10
+#: Camera stations: the marker whose first view (first_view) the station takes, and the markers
+#: clicked from it (each in the picture, > 70 px from its edges). The four small targets S1-S4
+#: share one view; every other marker is clicked from its own (from another marker's view, at
+#: 13-15 m and obliquely, the roof corners B1, B5 and B6 were declined in most views).
+STATIONS = [("S1", ["S1", "S2", "S3", "S4"])] + [(m, [m]) for m in (
+    "G1", "G2", "G3", "G4", "R1", "B1", "B2", "B3", "B4", "B5", "B6", "T1", "T2", "T3", "T4", "T5")]
+#: chi-square(3) at 0.95: the truth is inside the stated 95 % ellipsoid below this.
+CHI2_3_95 = 7.815
 
 
 @pytest.fixture(scope="module")
@@ -64,22 +73,20 @@ def first_view(local) -> float:
     return float(np.degrees(np.arctan2(local[0] - cx, local[1] - cy)))
 
 
-def auto_aim(page, t: place.TruthPoint) -> dict:
-    """M, one click on the marker, A; then Enter and the id when auto-aim found >= 2 views,
-    else Esc. Returns what happened: the auto-aim report and the stored point (or None)."""
+def auto_aim(page, t: place.TruthPoint, a: dict) -> dict:
+    """M, one click on the marker at its window position `a` (AIM_JS), A; then Enter and the id
+    when auto-aim found >= 2 views, else Esc. Returns what happened: the auto-aim report and
+    the stored point (or None)."""
     page.keyboard.press("m")
     page.wait_for_selector("#measure-panel:not([hidden])")
-    a = page.evaluate(AIM_JS, [list(t.ecef), first_view(t.local), ELEVATION, RANGE, OFFSET])
-    assert a["dist"] < 1e-5, a  # the projection and Cesium's pick ray agree
-    w, h = a["canvas"]
-    assert 0 < a["win"][0] < w and 0 < a["win"][1] < h, a
     page.mouse.click(a["x"], a["y"])
     page.wait_for_function("gsgeo.state.measure.rays.length === 1")
     page.keyboard.press("a")
     page.wait_for_function("gsgeo.state.measure.autoaim && !gsgeo.state.measure.autoaim.running",
                            timeout=600_000, polling=250)
     report = page.evaluate("""() => { const m = gsgeo.state.measure;
-        return {...gsgeo.autoaim.last, rays: m.rays.map((r) => ({auto: !!r.auto, score: r.score ?? null})),
+        return {...gsgeo.autoaim.last, toRays: gsgeo.autoaim.last.rays,
+                rays: m.rays.map((r) => ({auto: !!r.auto, score: r.score ?? null})),
                 status: document.querySelector('#status').textContent,
                 panel: (document.querySelector('#autoaim-report') || {}).textContent || '',
                 thumbs: document.querySelectorAll('#ray-table img.autoaim-thumb').length}; }""")
@@ -119,28 +126,96 @@ def check_report(rep: dict) -> None:
         assert reason in rep["panel"] and reason in rep["status"], rep
 
 
-def test_one_click_and_a_store_a_ground_target_within_3_cm(server, page):
-    t = truth("G1")
-    r = auto_aim(page, t)
-    rep, pt = r["report"], r["point"]
-    check_report(rep)
-    assert pt is not None, rep["text"]
-    auto = [ray for ray in pt["rays"] if ray.get("auto")]
-    assert len(pt["rays"]) >= 3 and len(auto) >= 2, pt["rays"]
-    assert all(isinstance(ray.get("score"), float) for ray in auto), auto
-    assert error_of(pt, t) <= WITHIN_M, (error_of(pt, t), rep["text"])
-    assert not page.errors, page.errors
+#: The scene canvas (WebGL, its drawing buffer kept) or the still over it, as RGBA bytes of a
+#: box [x0, y0, w, h] in drawing-buffer pixels.
+PIXELS_JS = """([which, box]) => { const src = which === 'still'
+    ? document.querySelector('canvas.gsgeo-still') : gsgeo.viewer.scene.canvas;
+  const c = document.createElement('canvas'); c.width = box[2]; c.height = box[3];
+  const g = c.getContext('2d'); g.drawImage(src, box[0], box[1], box[2], box[3], 0, 0, box[2], box[3]);
+  return Array.from(g.getImageData(0, 0, box[2], box[3]).data); }"""
 
 
-def test_a_pole_top_is_declined_with_reasons_or_stored_close(server, page):
-    """A pole top: the patch around it is mostly background, which changes between views;
-    auto-aim may decline, but never stores a point more than 10 cm off."""
-    t = truth("T1")
-    r = auto_aim(page, t)
-    rep, pt = r["report"], r["point"]
-    check_report(rep)
-    if pt is None:
-        assert rep["declined"] or rep["text"].startswith("Auto-aim declined"), rep
-    else:
-        assert error_of(pt, t) <= WRONG_M, (error_of(pt, t), rep["text"])
-    assert not page.errors, page.errors
+#: The window position (page CSS pixels) of a world point (rendered ECEF) in the present view,
+#: and the distance of the pick ray through it from the point (m), as AIM_JS returns them.
+WINDOW_JS = """(target) => { const C = Cesium, v = gsgeo.viewer;
+  const K = new C.Cartesian3(target[0], target[1], target[2]);
+  const win = C.SceneTransforms.worldToWindowCoordinates(v.scene, K);
+  const ray = v.camera.getPickRay(win);
+  const w = C.Cartesian3.subtract(K, ray.origin, new C.Cartesian3());
+  const along = C.Cartesian3.dot(w, ray.direction);
+  const perp = C.Cartesian3.subtract(w, C.Cartesian3.multiplyByScalar(ray.direction, along,
+                                                                     new C.Cartesian3()), new C.Cartesian3());
+  const rect = v.scene.canvas.getBoundingClientRect();
+  return {x: rect.left + win.x, y: rect.top + win.y, win: [win.x, win.y],
+          canvas: [v.scene.canvas.clientWidth, v.scene.canvas.clientHeight],
+          dist: C.Cartesian3.magnitude(perp)};
+}"""
+
+
+def station(page, lead: place.TruthPoint, ids: list[str]) -> list[dict]:
+    """Take the station of marker `lead`, wait until its view is drawn, and measure markers
+    `ids` from it by auto-aim; checks that no frame of every splat is drawn meanwhile and that
+    the operator sees the view's last frame (the still) throughout. Returns the outcomes."""
+    f0 = page.evaluate("gsgeo.renderer.framesOfAll")
+    t0 = time.perf_counter()
+    view = [first_view(lead.local), ELEVATION, RANGE, OFFSET]
+    page.evaluate(AIM_JS, [list(lead.ecef), *view])
+    aims = {pid: page.evaluate(WINDOW_JS, list(truth(pid).ecef)) for pid in ids}
+    page.wait_for_function(f"gsgeo.still.shown() === null && gsgeo.renderer.framesOfAll > {f0}"
+                           " && gsgeo.renderer.settled()", timeout=180_000, polling=200)
+    w, h = aims[ids[0]]["canvas"]
+    for pid, a in aims.items():
+        assert a["dist"] < 1e-5, a  # the projection and Cesium's pick ray agree
+        assert 70 < a["win"][0] < w - 70 and 70 < a["win"][1] < h - 70, (pid, a)
+    x, y = aims[ids[0]]["win"]
+    box = [int(x) - 40, int(y) - 40, 80, 80]
+    before = page.evaluate(PIXELS_JS, ["scene", box])
+    assert len(set(before)) > 20  # the scene is drawn there (not a flat background)
+    full = page.evaluate("gsgeo.renderer.framesOfAll")
+    out = []
+    print(f"station {lead.id}: drawn {time.perf_counter() - t0:.1f} s after the camera was set")
+    for pid in ids:
+        t1 = time.perf_counter()
+        r = auto_aim(page, truth(pid), aims[pid])
+        print(f"{pid}: {time.perf_counter() - t1:.1f} s, M to stored; A -> rays "
+              f"{(r['report'].get('toRays') or float('nan')) / 1000:.1f} s; {r['report']['text']}")
+        check_report(r["report"])
+        assert not page.errors, page.errors
+        out.append({"id": pid, **r})
+    # on the standing camera: no frame of every splat, and the still is the view's last frame
+    assert page.evaluate("gsgeo.still.shown() !== null")
+    assert page.evaluate("gsgeo.renderer.framesOfAll") == full, lead.id
+    assert page.evaluate(PIXELS_JS, ["still", box]) == before, lead.id
+    return out
+
+
+def maha2_of(point: dict, t: place.TruthPoint) -> float:
+    """Squared Mahalanobis distance of the truth from the stored point under its stated total
+    covariance (ECEF)."""
+    d = np.asarray(point["result"]["point_ecef"]) - np.asarray(t.ecef)
+    cov = np.asarray(point["result"]["cov_ecef_total"], dtype=float).reshape(3, 3)
+    return float(d @ np.linalg.solve(cov, d))
+
+
+def test_one_click_and_a_measure_at_least_15_of_the_20_markers(server, page):
+    """>= 15 of the 20 markers stored with >= 3 rays within 3 cm of the truth; no stored point
+    more than 10 cm off (the others declined, each view with its reason); the stated 95 %
+    ellipsoid holds the truth for >= 80 % of the stored points (the manual clicks' figure in
+    benchmarks/README.md is 20 of 20); each auto ray stored with its score and the flag."""
+    assert sorted(pid for _, ids in STATIONS for pid in ids) == sorted(t.id for t in place.truth_points())
+    results = []
+    for lead, ids in STATIONS:
+        results += station(page, truth(lead), ids)
+    stored = [r for r in results if r["point"] is not None]
+    summary = {r["id"]: (round(1000 * error_of(r["point"], truth(r["id"])), 1) if r["point"] else
+                         r["report"]["text"]) for r in results}
+    print(summary)
+    good = [r for r in stored if error_of(r["point"], truth(r["id"])) <= WITHIN_M
+            and len(r["point"]["rays"]) >= 3]
+    assert len(good) >= 15, summary
+    assert all(error_of(r["point"], truth(r["id"])) <= WRONG_M for r in stored), summary
+    for r in stored:
+        auto = [ray for ray in r["point"]["rays"] if ray.get("auto")]
+        assert len(auto) >= 2 and all(isinstance(ray.get("score"), float) for ray in auto), r["point"]["rays"]
+    inside = sum(maha2_of(r["point"], truth(r["id"])) < CHI2_3_95 for r in stored)
+    assert inside >= 0.8 * len(stored), (inside, len(stored))

@@ -118,7 +118,7 @@ function setCamera(viewer, camera) {
 }
 
 /** Render at `camera` until a frame shows the splats sorted and drawn for it, without the
- *  measuring graphics (rays, markers: they would sit on the feature) and the globe, and return
+ *  globe and the sky (the measuring graphics are on the overlay, not in the frame), and return
  *  the crops `boxes()` gives of that frame (canvases) and the number of frames it took. The
  *  drawing buffer is read in the frame's postRender, before the browser may clear it.
  *

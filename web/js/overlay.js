@@ -47,7 +47,6 @@ export class Overlay {
     this.fixedView = fixedView;
     this.requestFrame = () => viewer.scene.requestRender();
     this.shown = null; // the view of the scene canvas' last frame (viewOf)
-    this.painted = null; // the view the overlay was last painted for
     this.queued = false;
     viewer.scene.postRender.addEventListener(() => {
       const fixed = this.fixedView();
@@ -119,7 +118,6 @@ export class Overlay {
     const ctx = this.ctx;
     ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     ctx.clearRect(0, 0, w, h);
-    this.painted = view;
     if (!view) return;
     const f = h / (2 * Math.tan(view.fovy / 2));
     const near = Math.max(view.near, 1e-3);
