@@ -4,16 +4,13 @@ move of 1 mm, a turn of 1e-6 rad, another canvas size or field of view is not.""
 
 from __future__ import annotations
 
-import json
 import shutil
-import subprocess
 
 import numpy as np
 import pytest
 
-from tests.conftest import REPO
+from tests.nodejs import run_web_module
 
-OVERLAY_JS = REPO / "web" / "js" / "overlay.js"
 pytestmark = pytest.mark.skipif(shutil.which("node") is None, reason="Node.js is not installed")
 
 
@@ -29,13 +26,7 @@ def view_matrix(position, yaw: float) -> list[float]:
 
 
 def same(a: dict, b: dict) -> bool:
-    # (a dynamic import: the module reads window.Cesium when it loads)
-    src = (f"globalThis.window = {{}};\nconst {{ sameView }} = await import('{OVERLAY_JS.as_uri()}');\n"
-           f"const [a, b] = {json.dumps([a, b])};\nconsole.log(JSON.stringify(sameView(a, b)));\n")
-    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
-                         text=True, timeout=60)
-    assert out.returncode == 0, out.stderr
-    return json.loads(out.stdout)
+    return run_web_module("overlay.js", "console.log(JSON.stringify(M.sameView(...data)));", [a, b])
 
 
 def test_a_camera_set_back_is_the_same_view_and_any_real_change_is_not():

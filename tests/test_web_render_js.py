@@ -4,15 +4,12 @@ default on a GPU, and the page's ?msaa= over both."""
 
 from __future__ import annotations
 
-import json
 import shutil
-import subprocess
 
 import pytest
 
-from tests.conftest import REPO
+from tests.nodejs import run_web_module
 
-RENDER_JS = REPO / "web" / "js" / "render.js"
 pytestmark = pytest.mark.skipif(shutil.which("node") is None, reason="Node.js is not installed")
 
 SWIFTSHADER = ("ANGLE (Google, Vulkan 1.3.0 (SwiftShader Device (Subzero) (0x0000C0DE)), "
@@ -21,12 +18,8 @@ GPU = "ANGLE (NVIDIA, NVIDIA GeForce RTX 3060 (0x00002503) Direct3D11 vs_5_0 ps_
 
 
 def run_js(body: str, data) -> object:
-    src = (f"globalThis.window = {{}};\nimport * as R from '{RENDER_JS.as_uri()}';\n"
-           f"const data = {json.dumps(data)};\n{body}\n")
-    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
-                         text=True, timeout=60)
-    assert out.returncode == 0, out.stderr
-    return json.loads(out.stdout)
+    """Run `body` with web/js/render.js bound as R."""
+    return run_web_module("render.js", "const R = M;\n" + body, data)
 
 
 def test_software_renderers_draw_without_multisampling_and_gpus_keep_the_default():

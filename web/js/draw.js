@@ -54,11 +54,6 @@ export class Drawer {
     if (this.ellipsoids.delete(group)) this.badge();
   }
 
-  /** Run `fn`, which draws (the overlay is painted once, after it). */
-  batch(fn) {
-    fn();
-  }
-
   /** A ray from `origin` along unit `direction` for `len` metres (rendered ECEF), its origin
    *  marked and labelled `label` (or not labelled when null). */
   ray(group, origin, direction, len, color, label) {

@@ -11,8 +11,7 @@
 
 import { api } from "./api.js";
 import { add, cross, dot, norm, scale, sub, applyPoint, transformCovariance } from "./linalg.js";
-
-const Cesium = window.Cesium;
+import { viewOf } from "./overlay.js";
 
 /** Scale of the 2-D 95 % ellipse: sqrt of chi-square(2) at 0.95. */
 export const SCALE_95_2D = Math.sqrt(5.991);
@@ -31,12 +30,10 @@ const pending = new WeakMap();
  *  up (rendered ECEF), vertical field of view (rad), canvas size (CSS px); null when the
  *  frustum is not perspective. */
 export function currentCamera(viewer) {
-  const cam = viewer.camera;
-  if (!(cam.frustum instanceof Cesium.PerspectiveFrustum)) return null;
-  const arr = (c) => [c.x, c.y, c.z];
-  const canvas = viewer.scene.canvas;
-  return { position: arr(cam.positionWC), direction: arr(cam.directionWC), up: arr(cam.upWC),
-    fovy: cam.frustum.fovy, width: canvas.clientWidth, height: canvas.clientHeight };
+  const v = viewOf(viewer);
+  if (!v) return null;
+  const { position, direction, up, fovy, width, height } = v;
+  return { position, direction, up, fovy, width, height };
 }
 
 /** The pinhole of `camera`: f (px), right, and the depth of a point along the view direction. */

@@ -662,13 +662,11 @@ async function renamePoint(oldId, id, errorEl) {
 function drawPoints() {
   draw.clear("points");
   const mmNow = modelMatrix();
-  draw.batch(() => {
-    for (const p of state.points) {
-      if (!p.result || !p.result.point_ecef) continue;
-      draw.marker("points", p.id, applyPoint(mmNow, p.result.point_ecef),
-        p.id === state.selected ? COLORS.selected : COLORS.point);
-    }
-  });
+  for (const p of state.points) {
+    if (!p.result || !p.result.point_ecef) continue;
+    draw.marker("points", p.id, applyPoint(mmNow, p.result.point_ecef),
+      p.id === state.selected ? COLORS.selected : COLORS.point);
+  }
 }
 
 function drawSelected() {
@@ -679,16 +677,14 @@ function drawSelected() {
   const res = p.result;
   const mmNow = modelMatrix();
   const pr = applyPoint(mmNow, res.point_ecef);
-  draw.batch(() => {
-    for (const rr of res.rays || []) {
-      const o = applyPoint(mmNow, rr.origin_ecef);
-      const d = applyDirection(mmNow, rr.direction_ecef);
-      const dn = norm(d);
-      const color = rr.excluded ? COLORS.excluded : (rr.outlier ? COLORS.outlier : COLORS.ray.withAlpha(0.8));
-      draw.ray("selected", o, d.map((x) => x / dn), norm(sub(pr, o)) * 1.1, color, null);
-    }
-    draw.ellipsoid("selected", res.point_ecef, res.cov_ecef, mmNow, confScale(), COLORS.selected);
-  });
+  for (const rr of res.rays || []) {
+    const o = applyPoint(mmNow, rr.origin_ecef);
+    const d = applyDirection(mmNow, rr.direction_ecef);
+    const dn = norm(d);
+    const color = rr.excluded ? COLORS.excluded : (rr.outlier ? COLORS.outlier : COLORS.ray.withAlpha(0.8));
+    draw.ray("selected", o, d.map((x) => x / dn), norm(sub(pr, o)) * 1.1, color, null);
+  }
+  draw.ellipsoid("selected", res.point_ecef, res.cov_ecef, mmNow, confScale(), COLORS.selected);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -720,10 +716,8 @@ function drawFeatures() {
     const p = pointById(id);
     return p && p.result ? applyPoint(mmNow, p.result.point_ecef) : null;
   };
-  draw.batch(() => {
-    for (const f of state.lines) draw.path("features", f.points.map(posOf).filter(Boolean), COLORS.line, false);
-    for (const f of state.polygons) draw.path("features", f.points.map(posOf).filter(Boolean), COLORS.polygon, true);
-  });
+  for (const f of state.lines) draw.path("features", f.points.map(posOf).filter(Boolean), COLORS.line, false);
+  for (const f of state.polygons) draw.path("features", f.points.map(posOf).filter(Boolean), COLORS.polygon, true);
 }
 
 // ---------------------------------------------------------------------------------------

@@ -133,21 +133,20 @@ function draw(ctx) {
     const bs = state.tileset.boundingSphere;
     return norm(sub([bs.center.x, bs.center.y, bs.center.z], origin)) + bs.radius;
   };
-  let ell = null;
-  drawer.batch(() => {
-    m.rays.forEach((ray, i) => {
-      const rr = res && res.rays ? res.rays[i] : null;
-      const color = m.excluded.has(i) ? COLORS.excluded : (rr && rr.outlier ? COLORS.outlier : COLORS.ray);
-      const len = pRendered ? norm(sub(pRendered, ray.origin)) * 1.25 : reach(ray.origin);
-      drawer.ray("current", ray.origin, ray.direction, len, color, `${i + 1}`);
-    });
-    if (res) {
-      ell = drawer.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, ctx.confScale());
-      drawer.ring("current", pRendered, COLORS.solution);
-    }
+  m.rays.forEach((ray, i) => {
+    const rr = res && res.rays ? res.rays[i] : null;
+    const color = m.excluded.has(i) ? COLORS.excluded : (rr && rr.outlier ? COLORS.outlier : COLORS.ray);
+    const len = pRendered ? norm(sub(pRendered, ray.origin)) * 1.25 : reach(ray.origin);
+    drawer.ray("current", ray.origin, ray.direction, len, color, `${i + 1}`);
   });
-  $("#ellipsoid-note").textContent = res ? ellipsoidNote(state.conf, ell) : "";
-  // the epipolar guide (guide.js) needs each ray's depth; it draws itself after the render
+  if (res) {
+    const ell = drawer.ellipsoid("current", res.point_ecef, res.cov_ecef, mmNow, ctx.confScale());
+    drawer.ring("current", pRendered, COLORS.solution);
+    $("#ellipsoid-note").textContent = ellipsoidNote(state.conf, ell);
+  } else {
+    $("#ellipsoid-note").textContent = "";
+  }
+  // the epipolar guide (guide.js) needs each ray's depth; it paints itself with the overlay
   for (const ray of m.rays) requestDepth(ctx, ray);
   refreshGuide(ctx);
 }
