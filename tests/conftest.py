@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import hypothesis_profiles  # noqa: F401  (loads the Hypothesis profile: GSGEO_HYPOTHESIS=ci|long)
 import numpy as np
 import pytest
 

@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import pytest
 from aim_helpers import EAST, NORTH, UP, to_ecef
+from hypothesis_profiles import examples
 
 from gsgeo.aim.camera import Camera
 from gsgeo.aim.match import View, match_feature
@@ -266,7 +267,7 @@ def test_match_answers_whatever_the_geometry(noise):
     small = ref_img[::4, ::4].copy()
     coords = st.floats(-30, 30, allow_nan=False)
 
-    @settings(max_examples=60, deadline=None)
+    @settings(max_examples=examples(60), deadline=None)
     @given(pos=st.tuples(coords, coords, st.floats(-5, 30)),
            look=st.tuples(coords, coords, st.floats(-5, 5)),
            click=st.tuples(st.floats(-50, W + 50), st.floats(-50, H + 50)),

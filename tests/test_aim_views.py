@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 from aim_helpers import EAST, NORTH, UP, index_of, plane_splats, to_ecef, wall_splats
+from hypothesis_profiles import examples
 
 from gsgeo.aim.views import (
     MIN_SEPARATION_DEG,
@@ -124,7 +125,7 @@ def test_views_and_depth_answer_whatever_the_rays():
     index = index_of(plane_splats(half=3.0, step=0.1), wall_splats(1.0, half=3.0, top=3.0))
     local = st.tuples(st.floats(-50, 50), st.floats(-50, 50), st.floats(-5, 50))
 
-    @settings(max_examples=40, deadline=None)
+    @settings(max_examples=examples(40), deadline=None)
     @given(origins=st.lists(local, min_size=1, max_size=4), point=local,
            k=st.integers(1, 12), ifov=st.one_of(st.none(), st.floats(1e-5, 1e-2)))
     def check(origins, point, k, ifov):

@@ -29,6 +29,8 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     from fastapi.testclient import TestClient
 
+from hypothesis_profiles import examples
+
 from gsgeo.server.app import ServerConfig, create_app
 
 HOUSE = {"id": "B1", "roofs": ROOFS, "ground": GROUND, "attributes": {"function": "shed"}}
@@ -403,7 +405,7 @@ def fuzz_client(tmp_path_factory):
 IDS = ["E1", "E2", "E3", "E4", "R1", "R2", "X9"]
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+@settings(max_examples=examples(60), deadline=None, suppress_health_check=list(HealthCheck))
 @given(roofs=st.lists(st.lists(st.sampled_from(IDS), min_size=0, max_size=6), min_size=0,
                       max_size=4),
        ground=st.one_of(st.floats(allow_nan=False, allow_infinity=False),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from gsgeo.buildings.spec import Ground, building_to_json, parse_building, point_ids
 from gsgeo.errors import InputError
@@ -89,7 +90,7 @@ json_values = st.recursive(
 ids = st.sampled_from(["E1", "E2", "E3", "E4", "R1", "R2", "", " ", 3, None])
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(doc=st.fixed_dictionaries(
     {}, optional={"id": ids, "roofs": st.lists(st.lists(ids, max_size=5), max_size=3) | json_values,
                   "ground": json_values | st.floats(), "walls": json_values,

@@ -9,6 +9,7 @@ from buildings_helpers import GABLE, GABLE_ROOFS, GABLE_VOLUME, GROUND, measured
 from cityjson_helpers import validate_city_json
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from gsgeo.buildings.cityjson import city_json
 from gsgeo.buildings.model import build_building, footprint_en
@@ -182,7 +183,7 @@ def test_a_wall_that_is_not_vertical_is_refused():
     assert err.value.field == "walls[0]"
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=examples(80), deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), sigma=st.sampled_from([0.001, 0.02, 0.3, 2.0]),
        shuffle=st.booleans(), roll=st.integers(0, 3), extra=st.sampled_from(
            [None, ["E1", "E2", "E3"], ["R1", "R2", "E2"], ["E1", "E4", "E3", "E2"]]))

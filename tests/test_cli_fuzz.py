@@ -19,6 +19,7 @@ from pathlib import Path
 from conftest import REPO
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from gsgeo.cli import main
 
@@ -124,7 +125,7 @@ def check_outcome(code: int, err: str) -> None:
         assert len(problems) == 1, err
 
 
-@settings(max_examples=300, deadline=None, derandomize=True,
+@settings(max_examples=examples(300), deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(data=mutated_session(), args=ARGS)
 def test_malformed_sessions_get_one_message_and_exit_0_or_2(data, args):
@@ -133,7 +134,7 @@ def test_malformed_sessions_get_one_message_and_exit_0_or_2(data, args):
     check_outcome(code, err)
 
 
-@settings(max_examples=30, deadline=None, derandomize=True)
+@settings(max_examples=examples(30), deadline=None)
 @given(value=ODD_VALUE, key=st.sampled_from(["sigma_px", "crs", "source_crs", "points",
                                                "lines", "polygons", "vertical"]))
 def test_top_level_fields_of_any_type(value, key):

@@ -17,6 +17,7 @@ import pyogrio
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 from servertools import LONDON, ecef_of, rays_at, start_server
 
 from gsgeo.export.tables import CHECK_POINT_TYPES, LINE_TYPES, POLYGON_TYPES, RAY_TYPES
@@ -479,7 +480,7 @@ def test_page_cache_drops_a_page_of_an_older_revision():
 QUERY_WORDS = ["limit", "offset", "bbox", "bbox-crs", "datetime", "crs", "code", "f", "x", ""]
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(st.lists(st.tuples(st.sampled_from(QUERY_WORDS),
                           st.text(alphabet=st.characters(codec="utf-8"), max_size=30)),
                 max_size=4),

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import schemathesis
 from hypothesis import HealthCheck, settings
+from hypothesis_profiles import examples
 from schemathesis.checks import not_a_server_error, status_code_conformance
 from servertools import london_rays
 
@@ -55,7 +56,7 @@ def _ensure_fixture_project() -> None:
 
 
 @schema.parametrize()
-@settings(max_examples=10, deadline=None,
+@settings(max_examples=examples(10), deadline=None,
           suppress_health_check=list(HealthCheck))
 def test_api_never_answers_500(case):
     _ensure_fixture_project()

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 import schemathesis
 from hypothesis import HealthCheck, settings
+from hypothesis_profiles import examples
 from pgcluster import pg_cluster  # noqa: F401  (the session's PostgreSQL cluster)
 from schemathesis.checks import not_a_server_error, status_code_conformance
 from servertools import london_rays
@@ -80,7 +81,7 @@ def ensure_fixture_project(svc: Projects) -> None:
 
 
 @schema.parametrize()
-@settings(max_examples=8, deadline=None, suppress_health_check=list(HealthCheck))
+@settings(max_examples=examples(8), deadline=None, suppress_health_check=list(HealthCheck))
 def test_postgres_backed_api_never_answers_500(case, pg_projects):
     ensure_fixture_project(pg_projects)
     if case.path_parameters and next(_toggle) % 2 == 0:

@@ -20,10 +20,12 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     from fastapi.testclient import TestClient
 
+from hypothesis_profiles import examples
+
 from gsgeo.server.app import ServerConfig, create_app
 
 PID = "fuzz"
-FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
+FUZZ = settings(max_examples=examples(40), deadline=None,
                 suppress_health_check=list(HealthCheck))
 
 

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from gsgeo.cli import main
 from gsgeo.errors import GsgeoError, InputError
@@ -512,7 +513,7 @@ def compressed_ply_files(draw) -> bytes:
 
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")     # it would print beside the message
-@settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+@settings(max_examples=examples(150), deadline=None, suppress_health_check=list(HealthCheck))
 @given(data=st.one_of(ply_files(), compressed_ply_files()))
 def test_fuzzed_ply_never_tracebacks(tmp_path_factory, capsys, monkeypatch, data):
     # GSGEO_DEBUG: the CLI re-raises instead of reporting, so only gsgeo's own errors (the

@@ -1,16 +1,19 @@
-"""Auto-aim (key A) in a real browser on the demo scene (`gsgeo demo`): for every one of the 20
-demo markers, one real mouse click on the marker in one view, A, and Enter (the ID prompt
-answered with the marker's id) store a point, or auto-aim declines with a reason (issue 20).
+"""Auto-aim (key A) in a real browser on the demo scene (`gsgeo demo`): for a sample of eight of
+the 20 demo markers, one of each kind (the four sculpture corners S1-S4, the ground target G1,
+the roof target R1, the eaves corner B4, the pole top T4), one real mouse click on the marker in
+one view, A, and Enter (the ID prompt answered with the marker's id) store a point, or auto-aim
+declines with a reason (issue 20). The rate over all 20 markers (>= 15 within 3 cm) is a
+measurement and lives in `python benchmarks/autoaim.py`, which checks the same thresholds.
 
 Truth: gsgeo.demo.place.truth_points() (the demo's analytic markers carried to ECEF by PROJ),
 independent of the viewer. The click goes to the marker's window position as the pinhole of
 the contract projects it (AIM_JS, checked against Cesium's pick ray).
 
-The markers are clicked from 17 camera stations (S1-S4 share one view, as a surveyor measures
+The markers are clicked from five camera stations (S1-S4 share one view, as a surveyor measures
 every target in sight before moving on): each station costs one or two frames of every splat
 (seconds each in SwiftShader), and everything done on a standing camera (the click, auto-aim's
 four views, each drawn as one frame of only the splats reaching its crop, Enter) costs none,
-which the sweep checks at every station, with the still the operator sees meanwhile pixel for
+which the test checks at every station, with the still the operator sees meanwhile pixel for
 pixel the view's last frame.
 """
 
@@ -36,9 +39,13 @@ WITHIN_M, WRONG_M = 0.03, 0.10
 #: Camera stations: the marker whose first view (first_view) the station takes, and the markers
 #: clicked from it (each in the picture, > 70 px from its edges). The four small targets S1-S4
 #: share one view; every other marker is clicked from its own (from another marker's view, at
-#: 13-15 m and obliquely, the roof corners B1, B5 and B6 were declined in most views).
-STATIONS = [("S1", ["S1", "S2", "S3", "S4"])] + [(m, [m]) for m in (
-    "G1", "G2", "G3", "G4", "R1", "B1", "B2", "B3", "B4", "B5", "B6", "T1", "T2", "T3", "T4", "T5")]
+#: 13-15 m and obliquely, the roof corners B1, B5 and B6 were declined in most views). One
+#: marker of each kind: sculpture corners, ground target, roof target, eaves corner, pole top.
+STATIONS = [("S1", ["S1", "S2", "S3", "S4"]), ("G1", ["G1"]), ("R1", ["R1"]), ("B4", ["B4"]),
+            ("T4", ["T4"])]
+#: Of the sample, at least this many stored with >= 3 rays within 3 cm (over all 20 markers
+#: the benchmark's threshold is 15; these eight were all stored within 2 cm in its runs).
+GOOD_OF_SAMPLE = 7
 #: chi-square(3) at 0.95: the truth is inside the stated 95 % ellipsoid below this.
 CHI2_3_95 = 7.815
 
@@ -197,12 +204,13 @@ def maha2_of(point: dict, t: place.TruthPoint) -> float:
     return float(d @ np.linalg.solve(cov, d))
 
 
-def test_one_click_and_a_measure_at_least_15_of_the_20_markers(server, page):
-    """>= 15 of the 20 markers stored with >= 3 rays within 3 cm of the truth; no stored point
-    more than 10 cm off (the others declined, each view with its reason); the stated 95 %
+def test_one_click_and_a_measure_a_sample_of_every_kind_of_marker(server, page):
+    """>= 7 of the 8 sampled markers stored with >= 3 rays within 3 cm of the truth; no stored
+    point more than 10 cm off (the others declined, each view with its reason); the stated 95 %
     ellipsoid holds the truth for >= 80 % of the stored points (the manual clicks' figure in
     benchmarks/README.md is 20 of 20); each auto ray stored with its score and the flag."""
-    assert sorted(pid for _, ids in STATIONS for pid in ids) == sorted(t.id for t in place.truth_points())
+    kinds = {pid[0] for _, ids in STATIONS for pid in ids}
+    assert kinds == {"S", "G", "R", "B", "T"}, kinds
     results = []
     for lead, ids in STATIONS:
         results += station(page, truth(lead), ids)
@@ -212,7 +220,7 @@ def test_one_click_and_a_measure_at_least_15_of_the_20_markers(server, page):
     print(summary)
     good = [r for r in stored if error_of(r["point"], truth(r["id"])) <= WITHIN_M
             and len(r["point"]["rays"]) >= 3]
-    assert len(good) >= 15, summary
+    assert len(good) >= GOOD_OF_SAMPLE, summary
     assert all(error_of(r["point"], truth(r["id"])) <= WRONG_M for r in stored), summary
     for r in stored:
         auto = [ray for ray in r["point"]["rays"] if ray.get("auto")]
