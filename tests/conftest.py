@@ -8,6 +8,9 @@ import hypothesis_profiles  # noqa: F401  (loads the Hypothesis profile: GSGEO_H
 import numpy as np
 import pytest
 
+# the browser tests' session fixtures: one Chromium, one demo and one box scene with their servers
+from tests.e2e.shared import box_data, box_server, browser, demo_data, demo_server  # noqa: E402, F401
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 SHARED_DATA = SHARED / "data"

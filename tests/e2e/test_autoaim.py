@@ -26,8 +26,7 @@ import pytest
 
 from gsgeo.demo import place, scene
 from gsgeo.demo.project import PROJECT_ID
-from tests.e2e.demoserver import demo_server
-from tests.e2e.workplace import AIM_JS, CHROMIUM, CHROMIUM_ARGS
+from tests.e2e.workplace import AIM_JS
 
 pytestmark = pytest.mark.e2e
 
@@ -51,27 +50,23 @@ CHI2_3_95 = 7.815
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    yield from demo_server(tmp_path_factory, "autoaim")
+def server(demo_server):
+    return demo_server
 
 
 @pytest.fixture(scope="module")
-def page(server):
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        pg = b.new_page(viewport=VIEWPORT)
-        errors: list[str] = []
-        pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
-        pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
-        pg.goto(f"{server}/?scene=demo&project={PROJECT_ID}")
-        pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
-        pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
-                             timeout=120_000)
-        pg.errors = errors
-        yield pg
-        b.close()
+def page(server, browser):
+    pg = browser.new_page(viewport=VIEWPORT)
+    errors: list[str] = []
+    pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
+    pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+    pg.goto(f"{server}/?scene=demo&project={PROJECT_ID}")
+    pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
+    pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
+                         timeout=120_000)
+    pg.errors = errors
+    yield pg
+    pg.close()
 
 
 def first_view(local) -> float:

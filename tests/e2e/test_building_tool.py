@@ -19,10 +19,9 @@ import pytest
 
 from gsgeo.crs import to_grid_many
 from gsgeo.demo import place, scene
-from gsgeo.demo.project import PROJECT_ID
-from tests.e2e.demoserver import demo_server
+from tests.e2e.shared import demo_project_copy
 from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS
-from tests.e2e.workplace import AIM_JS, ARTIFACTS, CHROMIUM, CHROMIUM_ARGS
+from tests.e2e.workplace import AIM_JS, ARTIFACTS
 
 pytestmark = pytest.mark.e2e
 
@@ -41,28 +40,29 @@ ROOF_RGBA = (0xFF, 0x3D, 0x2E, 0.55)
 GROUND_RGBA = (0x8A, 0x93, 0x9B, 0.25)
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    yield from demo_server(tmp_path_factory, "building-tool")
+#: This module's copy of the demo project (the demo scene, EPSG:27700, the truth as check points).
+PID = "demo-building"
 
 
 @pytest.fixture(scope="module")
-def page(server):
-    from playwright.sync_api import sync_playwright
+def server(demo_server):
+    demo_project_copy(demo_server, PID)
+    return demo_server
 
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        pg = b.new_page(viewport=VIEWPORT)
-        errors: list[str] = []
-        pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
-        pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
-        pg.goto(f"{server}/?scene=demo&project={PROJECT_ID}")
-        pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
-        pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
-                             timeout=120_000)
-        pg.errors = errors
-        yield pg
-        b.close()
+
+@pytest.fixture(scope="module")
+def page(server, browser):
+    pg = browser.new_page(viewport=VIEWPORT)
+    errors: list[str] = []
+    pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
+    pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+    pg.goto(f"{server}/?scene=demo&project={PID}")
+    pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
+    pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
+                         timeout=120_000)
+    pg.errors = errors
+    yield pg
+    pg.close()
 
 
 def truth() -> dict[str, place.TruthPoint]:
@@ -176,7 +176,7 @@ def solid_volume(vertices: np.ndarray, shell: list[list[list[int]]]) -> float:
 def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
     import httpx
 
-    pid = PROJECT_ID
+    pid = PID
     t = truth()
     ground = ground_height()
 

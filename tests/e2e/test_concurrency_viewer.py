@@ -13,7 +13,11 @@ from tests.servertools import london_rays
 
 pytestmark = pytest.mark.e2e
 
-data_dir, server, browser = workplace.data_dir, workplace.server, workplace.browser
+
+
+@pytest.fixture(scope="module")
+def server(box_server):
+    return box_server
 
 
 def test_a_change_on_a_stale_point_is_refused_and_said(server, browser):

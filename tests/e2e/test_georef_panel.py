@@ -14,7 +14,6 @@ new georeference version; Undo restores the root transform and the banner.
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import tempfile
 from pathlib import Path
@@ -26,7 +25,8 @@ import pytest
 from gsgeo.tiles.build import build_tileset
 from gsgeo.tiles.georef import Georeference
 from tests.e2e.scene import MARKERS, write_scene_ply
-from tests.e2e.workplace import AIM_JS, CESIUM_JS, CHROMIUM, CHROMIUM_ARGS
+from tests.e2e.shared import require_browser
+from tests.e2e.workplace import AIM_JS
 
 pytestmark = pytest.mark.e2e
 
@@ -97,12 +97,7 @@ def lon_lat_h(local) -> list[float]:
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed")
-    if importlib.util.find_spec("playwright") is None:
-        pytest.skip("Playwright for Python is not installed")
-    if not CESIUM_JS.is_file():
-        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
+    require_browser()
     import httpx
 
     from tests.servertools import start_server
@@ -141,21 +136,17 @@ def server(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def page(server):
-    from playwright.sync_api import sync_playwright
-
+def page(server, browser):
     base = server[0]
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        pg = b.new_page(viewport=VIEWPORT, accept_downloads=True)
-        errors: list[str] = []
-        pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
-        pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
-        pg.goto(f"{base}/?project={PID}")
-        pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
-        pg.errors = errors
-        yield pg
-        b.close()
+    pg = browser.new_page(viewport=VIEWPORT, accept_downloads=True)
+    errors: list[str] = []
+    pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
+    pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+    pg.goto(f"{base}/?project={PID}")
+    pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
+    pg.errors = errors
+    yield pg
+    pg.close()
 
 
 def root_transform(page) -> np.ndarray:

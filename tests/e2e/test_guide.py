@@ -17,9 +17,8 @@ import numpy as np
 import pytest
 
 from gsgeo.demo import place
-from gsgeo.demo.project import PROJECT_ID
-from tests.e2e.demoserver import demo_server
-from tests.e2e.workplace import AIM_JS, CHROMIUM, CHROMIUM_ARGS
+from tests.e2e.shared import demo_project_copy
+from tests.e2e.workplace import AIM_JS
 
 pytestmark = pytest.mark.e2e
 
@@ -51,30 +50,31 @@ OVERLAY_RGB_JS = """(pts) => { const c = document.querySelector('canvas.gsgeo-ov
     g.getImageData(Math.floor(x * dpr), Math.floor(y * dpr), 1, 1).data)); }"""
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    yield from demo_server(tmp_path_factory, "guide")
+#: This module's copy of the demo project (the demo scene, EPSG:27700, the truth as check points).
+PID = "demo-guide"
 
 
 @pytest.fixture(scope="module")
-def page(server):
-    from playwright.sync_api import sync_playwright
+def server(demo_server):
+    demo_project_copy(demo_server, PID)
+    return demo_server
 
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        pg = b.new_page(viewport=VIEWPORT)
-        errors: list[str] = []
-        pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
-        pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
-        pg.goto(f"{server}/?scene=demo&project={PROJECT_ID}")
-        pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true && !!gsgeo.tileset",
-                             timeout=90_000)
-        # the splats are not drawn: SwiftShader takes seconds a frame for them, and nothing
-        # here depends on them (the server answers /depth and /views from the tiles' files)
-        pg.evaluate("gsgeo.tileset.show = false")
-        pg.errors = errors
-        yield pg
-        b.close()
+
+@pytest.fixture(scope="module")
+def page(server, browser):
+    pg = browser.new_page(viewport=VIEWPORT)
+    errors: list[str] = []
+    pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
+    pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+    pg.goto(f"{server}/?scene=demo&project={PID}")
+    pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true && !!gsgeo.tileset",
+                         timeout=90_000)
+    # the splats are not drawn: SwiftShader takes seconds a frame for them, and nothing
+    # here depends on them (the server answers /depth and /views from the tiles' files)
+    pg.evaluate("gsgeo.tileset.show = false")
+    pg.errors = errors
+    yield pg
+    pg.close()
 
 
 @pytest.fixture()

@@ -15,7 +15,6 @@ shared real) tiles. The pictures are saved in the test's temporary folder.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
 import tempfile
@@ -30,7 +29,7 @@ from gsgeo.tiles.build import build_tileset
 from gsgeo.tiles.georef import Georeference
 from tests.conftest import WHITE_SCULPTURE
 from tests.e2e.scene import write_scene_ply
-from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS, CESIUM_BUILD, CHROMIUM, CHROMIUM_ARGS, serve
+from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS, serve
 
 pytestmark = pytest.mark.e2e
 
@@ -89,22 +88,6 @@ scene.postRender.addEventListener(() => {
 })();
 </script></body></html>
 """
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed")
-    if importlib.util.find_spec("playwright") is None:
-        pytest.skip("Playwright for Python is not installed")
-    if not (CESIUM_BUILD / "Cesium.js").is_file():
-        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,6 @@ without CORS (--scene-url bare=...): the browser refuses those tiles and the vie
 
 from __future__ import annotations
 
-import importlib.util
 import io
 import os
 import shutil
@@ -27,8 +26,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.e2e.shared import require_browser
 from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS
-from tests.e2e.workplace import CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, SCENE, make_data_dir
+from tests.e2e.workplace import SCENE, make_data_dir
 from tests.servertools import REPO, free_port
 
 pytestmark = pytest.mark.e2e
@@ -93,12 +93,7 @@ def stop(proc: subprocess.Popen) -> None:
 @pytest.fixture(scope="module")
 def hosts(tmp_path_factory):
     """nginx (CORS and bare ports) and gsgeo serve --scenes: a dict of URLs and log paths."""
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed")
-    if importlib.util.find_spec("playwright") is None:
-        pytest.skip("Playwright for Python is not installed")
-    if not CESIUM_JS.is_file():
-        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
+    require_browser()
     if not os.access(NGINX, os.X_OK):
         pytest.skip("Debian's nginx is not installed (bash scripts/install.sh --test "
                     "installs nginx-light)")
@@ -143,16 +138,6 @@ def hosts(tmp_path_factory):
         if gsgeo is not None:
             stop(gsgeo)
         stop(nginx)
-
-
-@pytest.fixture(scope="module")
-def browser(hosts):
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 def canvas_pixels(page) -> np.ndarray:

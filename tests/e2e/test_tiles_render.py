@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
 
@@ -12,21 +10,11 @@ from gsgeo.tiles.georef import Georeference
 from gsgeo.tiles.ply import write_ply
 from gsgeo.tiles.splats import SH_C0, Splats
 from tests.conftest import REPO
-from tests.e2e.tiles_page import CESIUM_BUILD, CHROMIUM, render
+from tests.e2e.tiles_page import render
 
 pytestmark = pytest.mark.e2e
 ARTIFACTS = REPO / "artifacts"
 REAL_VIEWPORT = (320, 240)
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _browser_available():
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed")
-    if importlib.util.find_spec("playwright") is None:
-        pytest.skip("Playwright for Python is not installed")
-    if not (CESIUM_BUILD / "Cesium.js").is_file():
-        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
 
 
 def _lit(img: np.ndarray) -> np.ndarray:
@@ -43,13 +31,13 @@ def _coloured_blobs(n: int, rng) -> Splats:
                   np.zeros((n, 0, 3), np.float32))
 
 
-def test_synthetic_scene_renders_as_splats(tmp_path, rng):
+def test_synthetic_scene_renders_as_splats(browser, tmp_path, rng):
     n = 400
     write_ply(tmp_path / "blobs.ply", _coloured_blobs(n, rng))
     site = tmp_path / "site"
     build_tileset(tmp_path / "blobs.ply", site / "ts", Georeference(
         "origin", origin=(40.0, -83.0, 250.0)), max_splats=1000, progress=None)
-    img, info, errors = render(site, "ts/tileset.json", ARTIFACTS / "tiles_blobs.png")
+    img, info, errors = render(browser, site, "ts/tileset.json", ARTIFACTS / "tiles_blobs.png")
     assert info["drawn"] == n, info
     lit = _lit(img)
     # 1-pixel points would light at most n pixels; splats of 0.4 m light far more
@@ -61,7 +49,7 @@ def test_synthetic_scene_renders_as_splats(tmp_path, rng):
         assert strong.sum() > 2 * n, (c, strong.sum())
 
 
-def test_real_scene_rebuilt_renders(tmp_path, white_sculpture, white_sculpture_rebuilt):
+def test_real_scene_rebuilt_renders(browser, tmp_path, white_sculpture, white_sculpture_rebuilt):
     """The shared real tileset -> PLY -> gsgeo tiles -> renders like the original: from the
     same camera, with every splat of each drawn and sorted, the two pictures cover the same
     pixels in the same colours."""
@@ -73,9 +61,9 @@ def test_real_scene_rebuilt_renders(tmp_path, white_sculpture, white_sculpture_r
     (site / "ours").symlink_to(rebuilt, target_is_directory=True)
     # a small viewport: SwiftShader's time per frame grows with the pixels splats cover
     size = REAL_VIEWPORT
-    img_o, info_o, errors_o = render(site, "orig/tileset.json",
+    img_o, info_o, errors_o = render(browser, site, "orig/tileset.json",
                                      ARTIFACTS / "tiles_real_original.png", size=size)
-    img_n, info, errors = render(site, "ours/tileset.json", ARTIFACTS / "tiles_real_gsgeo.png",
+    img_n, info, errors = render(browser, site, "ours/tileset.json", ARTIFACTS / "tiles_real_gsgeo.png",
                                  size=size, camera_url="orig/tileset.json")
     assert errors_o == [] and errors == [], (errors_o, errors)
     # every splat of each tileset is in the picture

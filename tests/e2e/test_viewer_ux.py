@@ -12,8 +12,6 @@ point carries the same datum warning.
 
 from __future__ import annotations
 
-import importlib.util
-
 import pyproj
 import pytest
 from playwright.sync_api import Error as PlaywrightError
@@ -21,13 +19,9 @@ from playwright.sync_api import Error as PlaywrightError
 from tests.e2e.scene import MARKERS
 from tests.e2e.workplace import (
     AIM_JS,
-    CESIUM_JS,
-    CHROMIUM,
-    CHROMIUM_ARGS,
     SCENE,
     VIEWPOINTS,
     enu_to_ecef,
-    make_data_dir,
 )
 
 pytestmark = pytest.mark.e2e
@@ -50,42 +44,21 @@ FRAMES_JS = """(mode) => new Promise((done) => { const s = gsgeo.viewer.scene; s
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed")
-    if importlib.util.find_spec("playwright") is None:
-        pytest.skip("Playwright for Python is not installed")
-    if not CESIUM_JS.is_file():
-        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
+def server(box_server):
+    """The session's box scene server with this module's project UX and its check points."""
     import httpx
 
-    from tests.servertools import start_server
-
-    proc, base = start_server(make_data_dir(tmp_path_factory.mktemp("ux")))
-    try:
-        r = httpx.post(f"{base}/api/projects", json={"name": "UX", "id": PID, "scene": SCENE,
-                                                     "crs": "EPSG:27700"})
-        assert r.status_code == 201, r.text
-        # check points K1 (roof corner), K2 (ground mark) as WGS 84 longitude, latitude, height
-        pts = [dict(zip(("x", "y", "z"), TO_GEO.transform(*enu_to_ecef(MARKERS[m])), strict=True),
-                    id=k) for k, m in (("K1", "roof_ne"), ("K2", "ground_sw"))]
-        r = httpx.post(f"{base}/api/projects/{PID}/checkpoints", json={"crs": "EPSG:4979",
-                                                                        "points": pts})
-        assert r.status_code == 201, r.text
-        yield base
-    finally:
-        proc.terminate()
-        proc.communicate(timeout=10)
-
-
-@pytest.fixture(scope="module")
-def browser(server):
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield b
-        b.close()
+    base = box_server
+    r = httpx.post(f"{base}/api/projects", json={"name": "UX", "id": PID, "scene": SCENE,
+                                                 "crs": "EPSG:27700"})
+    assert r.status_code == 201, r.text
+    # check points K1 (roof corner), K2 (ground mark) as WGS 84 longitude, latitude, height
+    pts = [dict(zip(("x", "y", "z"), TO_GEO.transform(*enu_to_ecef(MARKERS[m])), strict=True),
+                id=k) for k, m in (("K1", "roof_ne"), ("K2", "ground_sw"))]
+    r = httpx.post(f"{base}/api/projects/{PID}/checkpoints", json={"crs": "EPSG:4979",
+                                                                    "points": pts})
+    assert r.status_code == 201, r.text
+    return base
 
 
 def open_page(browser, url: str, errors: list[str]):

@@ -9,7 +9,6 @@ position (Cesium.SceneTransforms.worldToWindowCoordinates) through page.mouse.
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import warnings
 
@@ -22,13 +21,9 @@ from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS
 from tests.e2e.workplace import (
     AIM_JS,
     ARTIFACTS,
-    CESIUM_JS,
-    CHROMIUM,
-    CHROMIUM_ARGS,
     SCENE,
     VIEWPOINTS,
     enu_to_ecef,
-    make_data_dir,
     up_vector,
 )
 
@@ -41,36 +36,14 @@ TO_GEO = pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
 
 
 @pytest.fixture(scope="module")
-def data_dir(tmp_path_factory):
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed")
-    if importlib.util.find_spec("playwright") is None:
-        pytest.skip("Playwright for Python is not installed")
-    if not CESIUM_JS.is_file():
-        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
-    return make_data_dir(tmp_path_factory.mktemp("workplace"))
+def data_dir(box_data):
+    """The session's box scene (tests/e2e/conftest.py), shared with the other box modules."""
+    return box_data
 
 
 @pytest.fixture(scope="module")
-def server(data_dir):
-    from tests.servertools import start_server
-
-    proc, base = start_server(data_dir)
-    try:
-        yield base
-    finally:
-        proc.terminate()
-        proc.communicate(timeout=10)
-
-
-@pytest.fixture(scope="module")
-def browser(server):
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield b
-        b.close()
+def server(box_server):
+    return box_server
 
 
 @pytest.fixture(scope="module")

@@ -120,7 +120,7 @@ def write_page(site: Path, tileset_url: str, camera_url: str = "") -> Path:
     return p
 
 
-def render(site: Path, tileset_url: str, png: Path, *, size=(800, 600),
+def render(browser, site: Path, tileset_url: str, png: Path, *, size=(800, 600),
            timeout_s: float = 180.0, camera_url: str = ""):
     """Render the tileset in headless Chromium; save a screenshot; return it as an RGB array,
     a dict of tileset statistics and the page errors.
@@ -128,13 +128,10 @@ def render(site: Path, tileset_url: str, png: Path, *, size=(800, 600),
     The camera looks at the bounding sphere of the tileset (or of `camera_url`'s tileset). The
     screenshot is the one frame in which every selected splat was drawn, sorted for this
     camera (`info["drawn"]` splats); Cesium draws nothing after it."""
-    from playwright.sync_api import sync_playwright
-
     write_page(site, tileset_url, camera_url)
-    with serve(site) as base, sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+    with serve(site) as base:
+        page = browser.new_page(viewport={"width": size[0], "height": size[1]})
         try:
-            page = browser.new_page(viewport={"width": size[0], "height": size[1]})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.goto(f"{base}/index.html")
@@ -151,7 +148,7 @@ def render(site: Path, tileset_url: str, png: Path, *, size=(800, 600),
                         features: t.statistics.numberOfPointsSelected,
                         drawn: window.state.drawn}; }""")
         finally:
-            browser.close()
+            page.close()
     return _read_png(png), info, errors
 
 

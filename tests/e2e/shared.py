@@ -1,0 +1,108 @@
+"""What the browser tests share, built once per test session (fixtures, made available to every
+test by tests/conftest.py): one Chromium (Playwright), one
+demo (`gsgeo demo --no-serve`) with its server, one box scene (`gsgeo tiles`) with its server.
+
+Each test module opens its own pages, and works in its own project where it stores anything,
+so no test depends on what another left behind. Everything here is skipped, with the reason,
+where Debian's chromium, Playwright for Python or CesiumJS (web/node_modules) is missing.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.e2e.workplace import CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, REPO, make_data_dir
+
+
+def require_browser() -> None:
+    """Skip (with the reason) where the browser tests cannot run."""
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is not installed")
+    if importlib.util.find_spec("playwright") is None:
+        pytest.skip("Playwright for Python is not installed")
+    if not CESIUM_JS.is_file():
+        pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator:
+    """Headless Chromium (SwiftShader) for the whole session; tests open and close pages."""
+    require_browser()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+def serve(data: Path, *extra: str, env: dict | None = None) -> Iterator[str]:
+    """`gsgeo serve --data DATA` on a free loopback port for a fixture's lifetime: its URL."""
+    from tests.servertools import start_server
+
+    proc, base = start_server(data, *extra, env=env)
+    try:
+        yield base
+    finally:
+        proc.terminate()
+        proc.communicate(timeout=10)
+
+
+@pytest.fixture(scope="session")
+def demo_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The demo built once (`gsgeo demo --no-serve`): its DATA directory."""
+    require_browser()
+    data = tmp_path_factory.mktemp("demo") / "data"
+    r = subprocess.run([sys.executable, "-m", "gsgeo", "demo", "--data", str(data), "--no-serve"],
+                       cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    return data
+
+
+@pytest.fixture(scope="session")
+def demo_server(demo_data: Path) -> Iterator[str]:
+    """The URL of `gsgeo serve` on the demo."""
+    yield from serve(demo_data)
+
+
+def demo_project_copy(server: str, pid: str) -> str:
+    """A project `pid` on the demo scene with the demo project's settings and check points (the
+    ground truth), for a module that stores points of its own; returns its id."""
+    import httpx
+
+    from gsgeo.demo.project import PROJECT_ID
+
+    with httpx.Client(base_url=server, timeout=60) as c:
+        demo = c.get(f"/api/projects/{PROJECT_ID}").json()
+        r = c.post("/api/projects", json={"name": f"{demo['name']} ({pid})", "id": pid,
+                                          "scene": demo["scene"], "crs": demo["crs"],
+                                          "sigma_px": demo["sigma_px"]})
+        assert r.status_code == 201, r.text
+        cps = c.get(f"/api/projects/{PROJECT_ID}/checkpoints").json()["check_points"]
+        by_crs: dict[str, list[dict]] = {}
+        for cp in cps:
+            by_crs.setdefault(cp["crs"], []).append(
+                {"id": cp["id"], "x": cp["x"], "y": cp["y"], "z": cp["z"]})
+        for crs, pts in by_crs.items():
+            r = c.post(f"/api/projects/{pid}/checkpoints", json={"crs": crs, "points": pts})
+            assert r.status_code == 201, r.text
+    return pid
+
+
+@pytest.fixture(scope="session")
+def box_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """DATA with scenes/box, made once by `gsgeo tiles` from tests/e2e/scene.py's PLY."""
+    require_browser()
+    return make_data_dir(tmp_path_factory.mktemp("box"))
+
+
+@pytest.fixture(scope="session")
+def box_server(box_data: Path) -> Iterator[str]:
+    """The URL of `gsgeo serve` on the box scene."""
+    yield from serve(box_data)
