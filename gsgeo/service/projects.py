@@ -937,9 +937,12 @@ class Projects(BuildingService):
             return tx.list_check_points(pid)
 
     def add_check_points(self, pid: str, rows: list[CheckPointRow], crs: str, *,
-                         role: str = "check", source: str = "", replace: bool = False) -> int:
+                         role: str = "check", source: str = "", replace: bool = False,
+                         overwrite: Collection[str] = ()) -> int:
         """Store check points given in ``crs`` (all or nothing); ``replace`` drops the old ones.
-        A repeated id is an InputError about ``points``."""
+        A repeated id is an InputError about ``points``; an id already stored is a
+        ConflictError naming the ids (nothing stored) unless ``overwrite`` holds it: then the
+        stored point is replaced, its role and source too, by what this write states."""
         from gsgeo.crs.resolve import parse_crs
 
         ids = [r.id for r in rows]
@@ -952,27 +955,43 @@ class Projects(BuildingService):
             parse_crs(crs)
         except CRSError as exc:
             raise exc.within("crs") from None
+        allowed = {item_id(i, "overwrite") for i in overwrite}
+        source = _text(source, "source", 300)
         recs = [CheckPointRecord(project_id=pid, id=r.id, x=r.x, y=r.y, z=r.z, crs=crs.strip(),
-                                 role=role, source=_text(source, "source", 300),
+                                 role=role, source=source,
                                  sigma_h=r.sigma_h, sigma_v=r.sigma_v) for r in rows]
         with self.store.transaction() as tx:
             self._project(tx, pid)
-            # what the import drops (replace) or overwrites (the same id), for the trail
             given = set(ids)
-            gone = [audit.check_point_values(c) for c in tx.list_check_points(pid)
-                    if replace or c.id in given]
+            stored = [] if replace else [c for c in tx.list_check_points(pid) if c.id in given]
+            refused = [c for c in stored if c.id not in allowed]
+            if refused:
+                raise ConflictError(
+                    f"{len(refused)} id(s) already stored: "
+                    + ", ".join(f"'{c.id}' ({c.role}, {c.crs}"
+                                + (f", source '{c.source}'" if c.source else "") + ")"
+                                for c in refused[:20])
+                    + ("; ..." if len(refused) > 20 else "")
+                    + "; nothing stored. Name them in 'overwrite' to replace them, or "
+                    "choose other ids", ids=[c.id for c in refused], field="points")
+            # what the import drops (replace) or overwrites (asked for by id), for the trail
+            gone = [audit.check_point_values(c) for c in
+                    (tx.list_check_points(pid) if replace else stored)]
             replaced = tx.delete_all_check_points(pid) if replace else 0
             tx.upsert_check_points(recs)
             before: JSONObject | None = {"replaced": replaced} if replace else None
             if gone:
                 before = (before or {}) | {"points": gone}
-            audit.record(tx, pid, f"{role} points imported", "check point", None, before,
-                         {"ids": ids, "crs": crs.strip(), "role": role, "source": source[:300]})
+            after: JSONObject = {"ids": ids, "crs": crs.strip(), "role": role, "source": source}
+            if stored:
+                after["overwritten"] = [c.id for c in stored]
+            audit.record(tx, pid, f"{role} points imported", "check point", None, before, after)
         return len(recs)
 
     def import_check_point_file(self, pid: str, data: bytes, filename: str | None, *,
                                 crs: str | None = None, fmt: str | None = None,
-                                role: str = "check", replace: bool = False) -> tuple[int, str, str]:
+                                role: str = "check", replace: bool = False,
+                                overwrite: Collection[str] = ()) -> tuple[int, str, str]:
         """Check points from a CSV, GeoJSON or GeoPackage file (format from ``fmt`` or the
         file name; CRS from ``crs``, else the file's, else EPSG:4979 for GeoJSON).
         Returns (number stored, CRS, format)."""
@@ -986,7 +1005,7 @@ class Projects(BuildingService):
             raise InputError("state the CRS the file's coordinates are in, e.g. EPSG:27700",
                              field="crs")
         n = self.add_check_points(pid, rows, crs, role=role, replace=replace,
-                                  source=(filename or "")[:300])
+                                  overwrite=overwrite, source=(filename or "")[:300])
         return n, crs, fmt
 
     def delete_check_point(self, pid: str, cid: str) -> None:
