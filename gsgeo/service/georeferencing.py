@@ -10,6 +10,7 @@ rewritten: nothing measured is lost, and an undo brings every point back exactly
 
 from __future__ import annotations
 
+import os
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -25,7 +26,8 @@ from gsgeo.measure import Rays
 from gsgeo.measure.framecov import FrameCovariance
 from gsgeo.solve.linalg import FloatArray
 from gsgeo.store.records import CheckPointRecord, PointRecord
-from gsgeo.tiles.georefhistory import SceneGeoref, read_scene_georef
+from gsgeo.tiles.georefhistory import SceneGeoref, scene_georef_from_bytes, scene_georef_of
+from gsgeo.tiles.tileset import read_tileset_snapshot
 
 _lock = threading.Lock()
 _cache: dict[Path, tuple[tuple[int, int, int], SceneGeoref]] = {}
@@ -51,7 +53,8 @@ def scene_path(data_dir: Path | None, scene: str | None) -> Path | None:
 
 
 def scene_frame(data_dir: Path | None, scene: str | None) -> SceneFrame | None:
-    """The current frame of a project's scene (cached on the file's identity and mtime)."""
+    """The current frame of a project's scene (cached on the file's identity: inode,
+    modification time and size, taken from the very read the frame is parsed from)."""
     path = scene_path(data_dir, scene)
     if path is None:
         return None
@@ -65,12 +68,25 @@ def scene_frame(data_dir: Path | None, scene: str | None) -> SceneFrame | None:
     if hit is not None and hit[0] == key:
         state = hit[1]
     else:
-        state = read_scene_georef(path)
+        doc, key = read_tileset_snapshot(path)
+        state = scene_georef_of(path, doc)
         with _lock:
             _cache[path] = (key, state)
+    return frame_of(state)
+
+
+def frame_of(state: SceneGeoref) -> SceneFrame:
+    """The scene frame of a georeference state."""
     frame = None if state.frame_covariance is None else \
         FrameCovariance.from_json(state.frame_covariance)
     return SceneFrame(state.version, state.root_transform, frame, state)
+
+
+def scene_frame_and_bytes(path: Path) -> tuple[SceneFrame, bytes]:
+    """The scene frame of tileset.json ``path`` and the bytes it was read from (one read:
+    what a change puts back on failure is what its frame was taken from)."""
+    raw = path.read_bytes()
+    return frame_of(scene_georef_from_bytes(path, raw)), raw
 
 
 def frame_record(ctx: SceneFrame | None, version: int | None = None) -> JSONObject | None:
@@ -135,7 +151,7 @@ def reference_from(cps: Sequence[CheckPointRecord]) -> Reference:
 def restore_on_failure(path: Path, before: bytes, exc: BaseException) -> None:
     """Put tileset.json back as it was when the store could not follow a georeference change
     (the store's transaction is rolled back by the caller)."""
-    tmp = path.with_name(f".tileset.restore.{threading.get_ident()}.tmp")
+    tmp = path.with_name(f".tileset.{os.getpid()}.restore{threading.get_ident()}.tmp")
     try:
         tmp.write_bytes(before)
         tmp.replace(path)

@@ -42,6 +42,7 @@ from gsgeo.service.georeferencing import (
     reference_from,
     restore_on_failure,
     scene_frame,
+    scene_frame_and_bytes,
     scene_path,
 )
 from gsgeo.service.measuring import (
@@ -776,8 +777,9 @@ class Projects(BuildingService):
         history = [] if ctx is None else [
             {k: h.get(k) for k in ("version", "kind", "at", "parent", "restores",
                                    "georeferenced")}
-            | {"scale": (h.get("summary") or {}).get("scale")} for h in ctx.state.history]
-        entry = None if ctx is None else ctx.state.entry()
+            | {"scale": h["scale"] if "scale" in h else (h.get("summary") or {}).get("scale")}
+            for h in ctx.state.history]
+        current = None if ctx is None else ctx.state.record()["summary"]
         return json_ready({
             "scene": p.scene, "version": 0 if ctx is None else ctx.version,
             "georeferenced": False if ctx is None else ctx.state.georeferenced,
@@ -785,7 +787,7 @@ class Projects(BuildingService):
             "control": [{"id": c.id, "x": c.x, "y": c.y, "z": c.z, "crs": c.crs,
                          "sigma_h": c.sigma_h, "sigma_v": c.sigma_v,
                          "measured": c.id in solved} for c in cps],
-            "current": None if entry is None else entry.get("summary")})
+            "current": current})
 
     def _georef_solution(self, tx: Transaction, p: Project, ctx: SceneFrame | None,
                          exclude: Sequence[str],
@@ -834,7 +836,8 @@ class Projects(BuildingService):
                                      summary=json_ready(summary),
                                      georeferenced=report["kind"] != "scale"
                                      or ctx.state.georeferenced,
-                                     expect_version=ctx.version)
+                                     expect_version=ctx.version,
+                                     by=author(p.id, "georeferenced"))
             return dict(report) | {
                 "applied": True,
                 "scene": {"name": p.scene, "version": state.version,
@@ -847,7 +850,7 @@ class Projects(BuildingService):
     def undo_georeference(self, pid: str) -> JSONObject:
         """Restore the scene's previous georeference and re-measure every project on it."""
         def restore(_tx: Transaction, _p: Project, path: Path, _ctx: SceneFrame) -> JSONObject:
-            state, sim = undo_scene(path)
+            state, sim = undo_scene(path, by=author(_p.id, "georeference undone"))
             return {"version": state.version, "georeferenced": state.georeferenced,
                     "root_transform": column_major(state.root_transform),
                     "similarity": column_major(sim)}
@@ -866,15 +869,14 @@ class Projects(BuildingService):
             with self.store.transaction() as tx:
                 p = self._project(tx, pid)
                 path = scene_path(self.data_dir, p.scene)
-                ctx = scene_frame(self.data_dir, p.scene)
-                if path is None or ctx is None:
+                if path is None:
                     raise InputError(f"project '{pid}' has no scene to georeference",
                                      field="scene")
-                before = path.read_bytes()
+                ctx, before = scene_frame_and_bytes(path)  # one read: the frame and its bytes
                 out = change(tx, p, path, ctx)
                 written = (path, before)
-                n = self._remeasure_scene(tx, p.scene, ctx, pid)
                 now = scene_frame(self.data_dir, p.scene)
+                n = self._remeasure_scene(tx, p.scene, ctx, now, pid)
                 audit.record(tx, pid, action, "scene", p.scene,
                              {"version": ctx.version, "root_transform": column_major(ctx.root)},
                              {"version": None if now is None else now.version,
@@ -887,11 +889,11 @@ class Projects(BuildingService):
         return out, n
 
     def _remeasure_scene(self, tx: Transaction, scene: str | None, before: SceneFrame,
-                         origin: str) -> int:
-        """Re-measure every point of every project on ``scene`` in the scene's new frame;
-        points without a recorded frame are pinned to the one ``before`` the change. The
-        projects other than ``origin`` (whose change it is) get a "re-solved" audit entry."""
-        ctx = scene_frame(self.data_dir, scene)
+                         ctx: SceneFrame | None, origin: str) -> int:
+        """Re-measure every point of every project on ``scene`` in the scene's new frame
+        ``ctx``; points without a recorded frame are pinned to the one ``before`` the change.
+        The projects other than ``origin`` (whose change it is) get a "re-solved" audit
+        entry."""
         pinned: JSONObject = {"version": before.version,
                               "root_transform": column_major(before.root)}
         n = 0
@@ -925,10 +927,37 @@ class Projects(BuildingService):
             was = p.scene_version
             m = self._remeasure_stored(tx, p, ctx)
             tx.update_project(p)
-            audit.record(tx, pid, "re-solved", "scene", p.scene, {"version": was},
-                         {"version": p.scene_version, "remeasured_points": m,
-                          "reason": "the scene's georeference changed outside the store"})
+            self._record_catch_up(tx, p, ctx, was, m)
         return True
+
+    @staticmethod
+    def _record_catch_up(tx: Transaction, p: Project, ctx: SceneFrame, was: int,
+                         remeasured: int) -> None:
+        """The trail of a catch-up to the scene's version: credited to the change's author
+        when the version records one (a change whose store transaction never committed,
+        e.g. killed after writing tileset.json), else to nobody but the reader."""
+        try:
+            by = ctx.state.record().get("by")
+        except InputError:
+            by = None  # its side file is gone: the author is not known
+        after: JSONObject = {"version": ctx.version, "remeasured_points": remeasured,
+                             "caught_up_by": audit.current_actor()}
+        if not isinstance(by, dict) or not isinstance(by.get("user"), str):
+            audit.record(tx, p.id, "re-solved", "scene", p.scene, {"version": was},
+                         after | {"reason": "the scene's georeference changed outside the "
+                                            "store"})
+            return
+        with audit.acting_as(by["user"]):
+            if by.get("project") == p.id and by.get("action") in ("georeferenced",
+                                                                  "georeference undone"):
+                audit.record(tx, p.id, str(by["action"]), "scene", p.scene,
+                             {"version": was},
+                             after | {"reason": "recorded when the next reader caught up: "
+                                                "the change's own transaction did not commit"})
+            else:
+                audit.record(tx, p.id, "re-solved", "scene", p.scene, {"version": was},
+                             after | {"by_project": by.get("project"),
+                                      "reason": f"{by.get('action')} by another project"})
 
     # check points ---------------------------------------------------------------------
     def list_check_points(self, pid: str) -> list[CheckPointRecord]:
@@ -1062,6 +1091,12 @@ class Projects(BuildingService):
                           "points in a projected CRS are compared as given and must be in the "
                           f"project's height system ({', '.join(height_types) or 'none'})")
         return json_ready(rep)
+
+
+def author(pid: str, action: str) -> JSONObject:
+    """Who makes a scene change, as the scene's history keeps it: the current actor, the
+    project and the action (the trail's words)."""
+    return {"user": audit.current_actor(), "project": pid, "action": action}
 
 
 def check_points_in_grid(cps: list[CheckPointRecord], project: Project,
