@@ -168,3 +168,31 @@ def test_the_next_write_removes_what_killed_writers_left(scene):
     apply_similarity(scene, _shift(1.0), kind="control", frame_covariance=None, summary=None)
     left = sorted(p.name for p in scene.glob(".tileset.*.tmp"))
     assert left == [mine.name], left
+
+
+# 5. a point whose stated georef_version its rays contradict ---------------------------------
+def test_a_point_taken_under_another_version_than_stated_is_refused(scene):
+    from georef_helpers import aim
+
+    from gsgeo.store.records import ConflictError
+
+    data = scene.parents[1]
+    svc = open_projects(data)
+    svc.create_project(name="loc", id="loc", scene="loc")
+    apply_similarity(scene, _shift(2.0e6), kind="control", frame_covariance=None, summary=None)
+    svc.follow_scene("loc")
+    rng = np.random.default_rng(3)
+    r0, r1 = _root(), _shift(2.0e6) @ _root()
+    local = np.array([3.0, -4.0, 1.5])  # inside the scene's 20 m box
+    up = r0[:3, 3] / np.linalg.norm(r0[:3, 3])
+    in_v0 = aim(rng, r0[:3, :3] @ local + r0[:3, 3], up, 10.0)
+    in_v1 = aim(rng, r1[:3, :3] @ local + r1[:3, 3], up, 10.0)
+    # stated right: stored, at the same place of the scene either way
+    a = svc.add_point("loc", {"id": "A", "rays": in_v0, "georef_version": 0})
+    b = svc.add_point("loc", {"id": "B", "rays": in_v1, "georef_version": 1})
+    assert np.allclose(a.result["point_ecef"], b.result["point_ecef"], atol=0.05)
+    # rays taken under version 0 said to be of version 1 (a torn read of the scene): 2000 km off
+    with pytest.raises(ConflictError) as exc:
+        svc.add_point("loc", {"id": "C", "rays": in_v0, "georef_version": 1})
+    assert exc.value.field == "georef_version" and "version 0" in str(exc.value), exc.value
+    assert [q.id for q in svc.list_points("loc")] == ["A", "B"]

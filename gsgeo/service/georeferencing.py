@@ -25,7 +25,7 @@ from gsgeo.jsontypes import JSONObject
 from gsgeo.measure import Rays
 from gsgeo.measure.framecov import FrameCovariance
 from gsgeo.solve.linalg import FloatArray
-from gsgeo.store.records import CheckPointRecord, PointRecord
+from gsgeo.store.records import CheckPointRecord, ConflictError, PointRecord
 from gsgeo.tiles.georefhistory import SceneGeoref, scene_georef_from_bytes, scene_georef_of
 from gsgeo.tiles.tileset import read_tileset_snapshot
 
@@ -104,6 +104,45 @@ def frame_record(ctx: SceneFrame | None, version: int | None = None) -> JSONObje
         raise InputError(f"the scene has no georeference version {v} (now {ctx.version})",
                          field="georef_version")
     return {"version": v, "root_transform": column_major(root)}
+
+
+#: A point farther than this many scene extents (plus MARGIN_M) from the scene's centre in
+#: the frame its rays are said to be of, yet within the scene in another version's frame,
+#: was taken under that other version.
+EXTENTS = 3.0
+MARGIN_M = 100.0
+
+
+def check_stated_frame(ctx: SceneFrame | None, stated: int | None,
+                       point_ecef: FloatArray | None) -> None:
+    """Refuse (ConflictError about ``georef_version``) a point whose rays, said to be taken
+    under georeference version ``stated``, put it outside the scene while another version
+    of the scene's frame puts it inside: the client built its rays from another version
+    than it states (e.g. a transform and a version read from two files). ``point_ecef``:
+    the point as measured now (the scene's current frame). Nothing is said where it cannot
+    be told (no scene, no bounds, no point, the point outside the scene in every frame)."""
+    if ctx is None or stated is None or point_ecef is None or ctx.state.extent_m is None:
+        return
+    then = ctx.state.root_of(int(stated))
+    if then is None:
+        return
+    limit = EXTENTS * ctx.state.extent_m + MARGIN_M
+    y = np.append(np.asarray(point_ecef, dtype=np.float64), 1.0)
+    y_stated = then @ np.linalg.solve(ctx.root, y)  # the point in the stated version's frame
+
+    def off(root: FloatArray) -> float:
+        return float(np.linalg.norm(np.linalg.solve(root, y_stated)[:3]))
+
+    if off(then) <= limit:
+        return
+    fits = [int(h["version"]) for h in ctx.state.history
+            if isinstance(h.get("version"), int) and off(matrix4(h["root_transform"])) <= limit]
+    if fits:
+        raise ConflictError(
+            f"the rays put the point {off(then):.0f} m from the scene in georeference version "
+            f"{stated}, but inside it in version {fits[-1]}: they were taken under version "
+            f"{fits[-1]} (the scene is now at version {ctx.version}); state the version the "
+            "rays' scene transform came from", field="georef_version")
 
 
 def carry(frame: JSONObject | None, ctx: SceneFrame | None) -> FloatArray | None:

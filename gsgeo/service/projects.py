@@ -36,6 +36,7 @@ from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, 
 from gsgeo.service.georeferencing import (
     SceneFrame,
     carry,
+    check_stated_frame,
     frame_record,
     measured_from,
     rays_now,
@@ -89,6 +90,12 @@ MAX_FEATURE_POINTS = 10_000
 #: Stored points measured at once in a re-measure: blocks large enough for the vectorised
 #: batch, small enough that the store's writer has work while the next block is measured.
 REMEASURE_BLOCK = 1000
+
+
+def _ecef(pt: PointRecord) -> FloatArray | None:
+    """A measured point's ECEF position (the scene's current frame), None when unsolved."""
+    got = None if pt.result is None else pt.result.get("point_ecef")
+    return None if got is None else np.asarray(got, dtype=np.float64)
 
 
 def _text(value: JSON, field: str, max_len: int = 2000) -> str:
@@ -461,6 +468,7 @@ class Projects(BuildingService):
                          frame=frame_record(ctx, new.georef_version),
                          measured_by=audit.current_actor())
         self._measure_into(pt, p, strict=True, rays=new.rays, ctx=ctx)
+        check_stated_frame(ctx, new.georef_version, _ecef(pt))
         with self.store.transaction() as tx:
             now = self._project(tx, pid)
             ctx_now = scene_frame(self.data_dir, now.scene)
@@ -468,6 +476,7 @@ class Projects(BuildingService):
                     (p.scene, p.settings_rev, None if ctx is None else ctx.version):
                 pt.frame = frame_record(ctx_now, new.georef_version)
                 self._measure_into(pt, now, strict=True, rays=new.rays, ctx=ctx_now)
+                check_stated_frame(ctx_now, new.georef_version, _ecef(pt))
             if point_id is None:
                 pt.id = self._next_id(tx.point_ids(pid))
                 if pt.result is not None:  # always, once measured strictly
@@ -559,6 +568,9 @@ class Projects(BuildingService):
                 return pt  # it changes nothing: no new version, no entry in the trail
             if remeasure or pt.solved_rev != p.settings_rev:
                 self._measure_into(pt, p, strict=True, rays=typed)
+                if typed is not None:
+                    check_stated_frame(scene_frame(self.data_dir, p.scene),
+                                       georef_version(changes.get("georef_version")), _ecef(pt))
             elif pt.result is not None:
                 pt.result.update({"point_id": pt.id, "code": pt.code,
                                   "description": pt.description})

@@ -83,6 +83,8 @@ class SceneGeoref:
     kind: str
     frame_covariance: dict[str, Any] | None
     history: list[dict[str, Any]] = field(default_factory=list)
+    #: half the diagonal of the root bounding volume (metres, root frame); None: unknown
+    extent_m: float | None = None
 
     def root_of(self, version: int) -> np.ndarray | None:
         """The root transform (4, 4) of a past or present version; None if unknown."""
@@ -150,15 +152,36 @@ def scene_georef_of(path: Path, doc: dict[str, Any]) -> SceneGeoref:
     if not isinstance(doc.get("root"), dict):
         raise InputError(f"{path}: the root tile must be a JSON object")
     root = matrix4(doc["root"].get("transform", np.eye(4).reshape(-1).tolist()))
+    extent = root_extent(doc["root"].get("boundingVolume"))
     g = _dict(_dict(doc.get("extras")).get("gsgeo")).get("georef")
     if not isinstance(g, dict) or not isinstance(g.get("history"), list):
         first = {"version": 0, "kind": "tiles", "root_transform": column_major(root),
                  "at": None, "parent": None, "frame_covariance": None, "summary": None}
-        return SceneGeoref(path, 0, root, not at_default_origin(root), "tiles", None, [first])
+        return SceneGeoref(path, 0, root, not at_default_origin(root), "tiles", None, [first],
+                           extent)
     return SceneGeoref(path, int(g.get("version", 0)), root,
                        bool(g.get("georeferenced", not at_default_origin(root))),
                        str(g.get("kind", "tiles")), g.get("frame_covariance"),
-                       list(g["history"]))
+                       list(g["history"]), extent)
+
+
+def root_extent(volume: Any) -> float | None:
+    """Half the diagonal of a root bounding ``box`` (or a ``sphere``'s radius), metres in the
+    root frame, measured from the root frame's origin; None for a region or anything else."""
+    v = _dict(volume)
+    try:
+        if isinstance(v.get("box"), list) and len(v["box"]) == 12:
+            b = np.asarray(v["box"], dtype=np.float64)
+            r = float(np.linalg.norm(b[:3]) + np.linalg.norm(b[3:].reshape(3, 3), axis=1)
+                      .dot([1.0, 1.0, 1.0]))
+        elif isinstance(v.get("sphere"), list) and len(v["sphere"]) == 4:
+            b = np.asarray(v["sphere"], dtype=np.float64)
+            r = float(np.linalg.norm(b[:3]) + abs(b[3]))
+        else:
+            return None
+    except (TypeError, ValueError):
+        return None
+    return r if np.isfinite(r) else None
 
 
 def initial_extras(root_transform: np.ndarray) -> dict[str, Any]:
