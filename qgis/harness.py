@@ -13,6 +13,8 @@ stdout (anything else on stdout is QGIS's own chatter). Commands (``cmd``):
 - ``send`` {collection, ids, role}: select the features of that layer whose point_id is in
   ``ids`` and send them; answers the server's reply and the body the plugin built.
 - ``send_memory`` {crs, rows, role}: the same from a memory layer of the user's own.
+  Both answer the plugin's questions with ``confirm`` (false when absent) and list them
+  (``asked``).
 - ``dialog`` {url, token}: the Connect dialog's "List projects"; answers what it shows.
 - ``settings``: the connection and project as stored in QgsSettings.
 - ``live`` {on}: the Live toggle; answers whether the timer runs.
@@ -141,8 +143,10 @@ def run(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any]:
         from gsgeo.checkpoints import layer_payload
 
         body, _ = layer_payload(layer, cmd["role"])
+        asked = answer_questions(plugin, cmd.get("confirm", False))
         answer = plugin.send_selected(cmd["role"])
-        return {"answer": answer, "body": body, "selected": len(ids), "messages": iface.messages}
+        return {"answer": answer, "body": body, "selected": len(ids), "messages": iface.messages,
+                "asked": asked}
     if name == "send_memory":
         return send_memory(plugin, iface, cmd)
     if name == "dialog":
@@ -193,9 +197,22 @@ def send_memory(plugin: Any, iface: Iface, cmd: dict[str, Any]) -> dict[str, Any
     QgsProject.instance().addMapLayer(layer)
     layer.selectAll()
     iface.active = layer
+    asked = answer_questions(plugin, cmd.get("confirm", False))
     answer = plugin.send_selected(cmd["role"])
     QgsProject.instance().removeMapLayer(layer.id())
-    return {"answer": answer, "messages": iface.messages}
+    return {"answer": answer, "messages": iface.messages, "asked": asked}
+
+
+def answer_questions(plugin: Any, yes: bool) -> list[str]:
+    """Answer the plugin's questions to the user with ``yes``; the questions asked."""
+    asked: list[str] = []
+
+    def ask(_title: str, text: str) -> bool:
+        asked.append(text)
+        return yes
+
+    plugin.ask = ask
+    return asked
 
 
 def render_ellipse(major: float, minor: float, bearing: float) -> dict[str, Any]:

@@ -54,8 +54,8 @@ def test_every_change_is_listed_once_with_before_and_after(client):
     cps = [{"id": "C1", "x": 545400.0, "y": 258100.0, "z": 60.0},
            {"id": "C2", "x": 545410.0, "y": 258100.0, "z": 60.0}]
     ok(c.post("/api/projects/h/checkpoints", json={"crs": CRS, "points": cps}), 201)
-    ok(c.post("/api/projects/h/checkpoints", json={"crs": CRS, "points": [cps[1] | {"z": 61.0}]}),
-       201)
+    ok(c.post("/api/projects/h/checkpoints", json={"crs": CRS, "overwrite": ["C2"],
+                                                   "points": [cps[1] | {"z": 61.0}]}), 201)
     ok(c.delete("/api/projects/h/checkpoints/C1"), 204)
     ok(c.delete("/api/projects/h/checkpoints"))
     ok(c.post("/api/projects/h/resolve"))

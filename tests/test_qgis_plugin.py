@@ -283,6 +283,25 @@ def test_plugin_adds_live_layers_and_sends_control_points(live):
                rows=[{"name": "X", "x": 1.0, "y": 2.0}, {"name": "X", "x": 3.0, "y": 4.0}])
     assert dup["answer"] is None and "duplicate id 'X'" in dup["messages"][-1], dup
     assert len(http.get(f"/api/projects/{pid}/checkpoints").json()["check_points"]) == 3
+    # a stored check point is never replaced unasked: the plugin asks, showing old and new
+    mine = qgis("send_memory", crs=GRID, role="control", confirm=False,
+                rows=[{"name": "CP9", "x": 530200.0, "y": 180500.0, "z": 20.0},
+                      {"name": "CP10", "x": 530300.0, "y": 180600.0, "z": 21.0}])
+    assert mine["answer"] is None, mine
+    (question,) = mine["asked"]
+    assert "CP9" in question and "CP10" not in question, question
+    assert "530100.25" in question and "530200" in question, question  # old and new x
+    assert "check" in question and "control" in question, question  # old and new role
+    assert "nothing" in mine["messages"][-1].lower(), mine["messages"]
+    cps = {c["id"]: c for c in http.get(f"/api/projects/{pid}/checkpoints").json()["check_points"]}
+    assert set(cps) == {"P2", "CP9", "2"}  # declined: nothing stored, CP10 neither
+    assert (cps["CP9"]["x"], cps["CP9"]["role"]) == (530100.25, "check")
+    mine = qgis("send_memory", crs=GRID, role="control", confirm=True,
+                rows=[{"name": "CP9", "x": 530200.0, "y": 180500.0, "z": 20.0}])
+    assert mine["answer"] == {"imported": 1} and len(mine["asked"]) == 1, mine
+    cps = {c["id"]: c for c in http.get(f"/api/projects/{pid}/checkpoints").json()["check_points"]}
+    assert (cps["CP9"]["x"], cps["CP9"]["role"]) == (530200.0, "control")
+    assert "replaced" in mine["messages"][-1], mine["messages"]
 
     # the Connect dialog lists the projects; the connection is kept in QgsSettings
     shown = qgis("dialog", url=base, token=TOKEN)

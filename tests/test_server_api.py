@@ -388,6 +388,61 @@ def test_check_point_errors(client, project):
     assert client.delete(base).json() == {"deleted": 1}
 
 
+def test_a_stored_check_point_is_never_replaced_unasked(client, project):
+    """A write naming an id already stored is refused (409 naming the ids, nothing stored);
+    only ``overwrite`` listing that id replaces it, role and source as that write states."""
+    base = f"/api/projects/{project}/checkpoints"
+    truth = {"id": "S1", "x": 530000.5, "y": 180000.25, "z": 12.0}
+    r = client.post(base, json={"crs": "EPSG:27700", "role": "check",
+                                "source": "gsgeo demo ground truth", "points": [truth]})
+    assert r.status_code == 201, r.text
+    stored = client.get(base).json()["check_points"]
+    measured = {"id": "S1", "x": -0.1, "y": 51.5, "z": 60.0}
+    # the plugin's write: S1 again as a control point, and a new S2 with it
+    r = client.post(base, json={"crs": "EPSG:4979", "role": "control",
+                                "points": [measured, {"id": "S2", "x": -0.2, "y": 51.6}]})
+    assert r.status_code == 409, r.text
+    body = r.json()
+    assert body["ids"] == ["S1"] and "S1" in body["message"] and body["field"] == "points"
+    assert client.get(base).json()["check_points"] == stored  # S2 not stored either
+    # the file import refuses the same way
+    r = _upload(client, project, "cp.csv", b"id,x,y,z\nS1,1,2,3\n", crs="EPSG:27700")
+    assert r.status_code == 409 and r.json()["ids"] == ["S1"], r.text
+    assert client.get(base).json()["check_points"] == stored
+    # asked for: S1 replaced with what this write states
+    r = client.post(base, json={"crs": "EPSG:4979", "role": "control", "source": "QGIS: pts",
+                                "overwrite": ["S1"], "points": [measured]})
+    assert r.status_code == 201, r.text
+    (now,) = client.get(base).json()["check_points"]
+    assert (now["x"], now["y"], now["z"], now["crs"], now["role"], now["source"]) == \
+        (-0.1, 51.5, 60.0, "EPSG:4979", "control", "QGIS: pts")
+    # the trail names what was replaced, with its old values
+    e = client.get(f"/api/projects/{project}/audit").json()["entries"][0]
+    assert e["action"] == "control points imported" and e["after"]["overwritten"] == ["S1"]
+    (old,) = e["before"]["points"]
+    assert (old["x"], old["role"], old["source"]) == (530000.5, "check", "gsgeo demo ground truth")
+
+
+def test_exported_check_points_say_their_role(client, project, tmp_path):
+    import pyogrio
+
+    add_point(client, project, 0)
+    e, n = UTM30.transform(*target(0)[:2])
+    base = f"/api/projects/{project}/checkpoints"
+    client.post(base, json={"crs": "EPSG:32630", "role": "control",
+                            "points": [{"id": "T0", "x": e, "y": n, "z": target(0)[2]}]})
+    client.post(base, json={"crs": "EPSG:32630", "points": [{"id": "K", "x": e + 5, "y": n}]})
+    r = client.get(f"/api/projects/{project}/export?format=gpkg")
+    assert r.status_code == 200, r.text
+    (tmp_path / "x.gpkg").write_bytes(r.content)
+    df = pyogrio.read_dataframe(tmp_path / "x.gpkg", layer="check_points").set_index("point_id")
+    assert df.loc["T0", "role"] == "control" and df.loc["K", "role"] == "check"
+    doc = client.get(f"/api/projects/{project}/export?format=geojson").json()
+    roles = {f["properties"]["point_id"]: f["properties"]["role"] for f in doc["features"]
+             if f["properties"].get("layer") == "check_points"}
+    assert roles == {"T0": "control", "K": "check"}
+
+
 def test_accuracy_needs_a_grid(client):
     pid = client.post("/api/projects", json={"name": "no grid"}).json()["id"]
     expect_422(client.get(f"/api/projects/{pid}/accuracy"), "crs")

@@ -56,7 +56,8 @@ POLYGON_TYPES: dict[str, str] = {"polygon_id": "str", "point_ids": "str", "n_poi
                                  "perimeter_2d": "float", "sigma_perimeter_2d": "float"}
 ELLIPSE_TYPES: dict[str, str] = {"point_id": "str", "ellipse_major_95": "float",
                                  "ellipse_minor_95": "float", "ellipse_bearing_deg": "float"}
-CHECK_POINT_TYPES: dict[str, str] = {"point_id": "str", "easting": "float", "northing": "float",
+CHECK_POINT_TYPES: dict[str, str] = {"point_id": "str", "role": "str",
+                                     "easting": "float", "northing": "float",
                                      "height": "float", "measured": "bool",
                                      "d_easting": "float", "d_northing": "float",
                                      "d_height": "float"}
@@ -610,8 +611,10 @@ def _collect_features(data: ExportData, lines: Iterable[Any], polygons: Iterable
 
 def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: dict[str, int],
                           xyz: np.ndarray, g: GridCRS) -> None:
-    """Check points in the export's grid CRS: id and easting/northing[/height] (or x/y/z)."""
+    """Check points in the export's grid CRS: id and easting/northing[/height] (or x/y/z),
+    ``role`` ("check" or "control"; "check" when not given)."""
     rows = []
+    roles = []
     for i, c in enumerate(check_points):
         cid = _get(c, "point_id", _get(c, "id"))
         vals = []
@@ -630,6 +633,7 @@ def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: 
         except (TypeError, ValueError):
             raise InputError(f"check point '{cid}': coordinates must be numbers") from None
         rows.append((str(cid), row))
+        roles.append(str(_get(c, "role") or "check"))
     if not rows:
         return
     cxyz = np.array([r[1] for r in rows], dtype=np.float64)
@@ -642,6 +646,7 @@ def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: 
     data.check_xyz = cxyz
     data.check_points = Table({
         "point_id": np.array([r[0] for r in rows], dtype=object),
+        "role": np.array(roles, dtype=object),
         "easting": cxyz[:, 0], "northing": cxyz[:, 1], "height": cxyz[:, 2],
         "measured": has,
         "d_easting": d[:, 0], "d_northing": d[:, 1], "d_height": d[:, 2],

@@ -417,7 +417,8 @@ def list_check_points(pid: PID, request: Request) -> dict[str, Any]:
              summary="Add check points given as JSON in a stated CRS")
 def add_check_points(pid: PID, body: m.CheckPointsCreate, request: Request) -> dict[str, Any]:
     rows = [CheckPointRow(c.id, c.x, c.y, c.z, c.sigma_h, c.sigma_v) for c in body.points]
-    n = svc(request).add_check_points(pid, rows, body.crs, role=body.role, replace=body.replace)
+    n = svc(request).add_check_points(pid, rows, body.crs, role=body.role, replace=body.replace,
+                                      overwrite=body.overwrite, source=body.source)
     return {"imported": n}
 
 
@@ -431,10 +432,14 @@ def import_check_points(
     format: Annotated[Literal["csv", "geojson", "gpkg"] | None, Form(
         description="file format; from the file name when absent")] = None,
     role: Annotated[Literal["check", "control"], Form()] = "check",
-    replace: Annotated[bool, Form()] = False,
+    replace: Annotated[bool, Form(description="drop the project's existing check points first")] = False,
+    overwrite: Annotated[list[str] | None, Form(description=(
+        "ids of stored check points this import may replace (the field repeated); any other "
+        "id already stored is refused with 409"))] = None,
 ) -> dict[str, Any]:
     n, crs, fmt = svc(request).import_check_point_file(
-        pid, file.file.read(), file.filename, crs=crs, fmt=format, role=role, replace=replace)
+        pid, file.file.read(), file.filename, crs=crs, fmt=format, role=role, replace=replace,
+        overwrite=overwrite or ())
     return {"imported": n, "crs": crs, "format": fmt}
 
 

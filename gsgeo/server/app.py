@@ -124,7 +124,11 @@ def _install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(ConflictError)
     async def conflict(_req: Request, exc: ConflictError) -> JSONResponse:
-        return _error(409, str(exc), exc.field)
+        out = _error(409, str(exc), exc.field)
+        if exc.ids:  # the stored items the change clashes with, for the client to show
+            out = JSONResponse({"detail": str(exc), "message": str(exc), "field": exc.field,
+                                "ids": exc.ids}, status_code=409)
+        return out
 
     app.add_exception_handler(PreconditionFailed, precondition_failed)  # 412, a ConflictError
 

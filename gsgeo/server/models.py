@@ -185,6 +185,12 @@ class CheckPointsCreate(BaseModel):
     crs: CrsText = Field(description="CRS the coordinates are given in, e.g. EPSG:27700")
     role: Literal["check", "control"] = "check"
     replace: bool = Field(False, description="drop the project's existing check points first")
+    overwrite: Annotated[list[ItemId], Field(max_length=100000)] = Field(
+        default_factory=list, description=(
+            "ids of stored check points this write may replace (coordinates, CRS, role and "
+            "source as given here); any other id already stored is refused with 409"))
+    source: Annotated[str, Field(max_length=300)] = Field(
+        "", description="where the coordinates come from (e.g. a file or layer name)")
     points: Annotated[list[CheckPointIn], Field(min_length=1, max_length=100000)]
 
 

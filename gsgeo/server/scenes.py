@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 #: The store file and the files SQLite keeps beside it.
 STORE_SUFFIXES = ("", "-wal", "-shm", "-journal")
 
-_cache: dict[Path, tuple[tuple[int, int], dict[str, Any]]] = {}
+_cache: dict[Path, tuple[tuple[int, int, int], dict[str, Any]]] = {}
 _cache_lock = threading.Lock()
 
 
@@ -54,26 +54,22 @@ def _bounds(ts: Tileset) -> dict[str, float] | None:
             "north": b["lat"][1], "min_height": b["h"][0], "max_height": b["h"][1]}
 
 
-def _splat_count(scene_dir: Path) -> int | None:
-    """Total number of splats, through the tiles package's tileset reader when available."""
+def _splat_count(tileset: Tileset) -> int | None:
+    """Total number of splats of a tileset already read."""
+    from gsgeo.tiles.reader import splat_count
+
     try:
-        from gsgeo.tiles import reader
-    except ImportError:
-        return None
-    fn = getattr(reader, "splat_count", None) or getattr(reader, "count_splats", None)
-    if fn is None:
-        return None
-    try:
-        return int(fn(scene_dir / "tileset.json"))
+        return splat_count(tileset)
     except Exception:  # a scene the reader cannot parse still gets listed
         return None
 
 
 def scene_info(scene_dir: Path) -> dict[str, Any]:
-    """Name, URL, origin (lon/lat/h), bounds and splat count of one scene directory."""
+    """Name, URL, origin (lon/lat/h), bounds and splat count of one scene directory, all
+    from one read of its tileset.json (the transform and ``georef_version`` of one version)."""
     ts = scene_dir / "tileset.json"
     st = ts.stat()
-    key = (st.st_mtime_ns, st.st_size)
+    key = (st.st_ino, st.st_mtime_ns, st.st_size)
     with _cache_lock:
         hit = _cache.get(ts)
     if hit and hit[0] == key:
@@ -85,23 +81,23 @@ def scene_info(scene_dir: Path) -> dict[str, Any]:
                             "error": None}
     from gsgeo.crs.frames import ecef_to_geodetic
     from gsgeo.errors import GsgeoError
-    from gsgeo.tiles.tileset import Tileset
+    from gsgeo.tiles.georefhistory import scene_georef_of
+    from gsgeo.tiles.tileset import Tileset, read_tileset_snapshot
 
     try:
-        tileset = Tileset(ts)
+        doc, key = read_tileset_snapshot(ts)  # the cache key of the version read
+        tileset = Tileset(ts, doc)
         m = tileset.root_transform
         info["transform"] = m.T.reshape(-1).tolist()  # column-major, as in tileset.json
         t = m[:3, 3]
         if np.linalg.norm(t) > 1e6:  # a geocentric translation: the scene is georeferenced
             lon, lat, h = ecef_to_geodetic(t)
             info["origin"] = {"lon": float(lon), "lat": float(lat), "height": float(h)}
-        from gsgeo.tiles.georefhistory import read_scene_georef
-
-        state = read_scene_georef(ts)
+        state = scene_georef_of(ts, doc)
         info["georeferenced"] = state.georeferenced
         info["georef_version"] = state.version
         info["bounds"] = _bounds(tileset)
-        info["splat_count"] = _splat_count(scene_dir)
+        info["splat_count"] = _splat_count(tileset)
     except (GsgeoError, OSError, ValueError, KeyError, TypeError, AttributeError,
             RecursionError) as exc:  # nested beyond the parser's depth
         info["error"] = f"tileset.json cannot be read: {exc}"

@@ -79,7 +79,7 @@ def building_values(b: BuildingRecord) -> JSONObject:
 def check_point_values(c: CheckPointRecord) -> JSONObject:
     """A check or control point as the trail shows it (coordinates in its own CRS)."""
     return {"id": c.id, "x": c.x, "y": c.y, "z": c.z, "crs": c.crs, "role": c.role,
-            "sigma_h": c.sigma_h, "sigma_v": c.sigma_v}
+            "sigma_h": c.sigma_h, "sigma_v": c.sigma_v, "source": c.source}
 
 
 def project_values(p: Project) -> JSONObject:

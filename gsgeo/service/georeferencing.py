@@ -10,6 +10,7 @@ rewritten: nothing measured is lost, and an undo brings every point back exactly
 
 from __future__ import annotations
 
+import os
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -24,8 +25,9 @@ from gsgeo.jsontypes import JSONObject
 from gsgeo.measure import Rays
 from gsgeo.measure.framecov import FrameCovariance
 from gsgeo.solve.linalg import FloatArray
-from gsgeo.store.records import CheckPointRecord, PointRecord
-from gsgeo.tiles.georefhistory import SceneGeoref, read_scene_georef
+from gsgeo.store.records import CheckPointRecord, ConflictError, PointRecord
+from gsgeo.tiles.georefhistory import SceneGeoref, scene_georef_from_bytes, scene_georef_of
+from gsgeo.tiles.tileset import read_tileset_snapshot
 
 _lock = threading.Lock()
 _cache: dict[Path, tuple[tuple[int, int, int], SceneGeoref]] = {}
@@ -51,7 +53,8 @@ def scene_path(data_dir: Path | None, scene: str | None) -> Path | None:
 
 
 def scene_frame(data_dir: Path | None, scene: str | None) -> SceneFrame | None:
-    """The current frame of a project's scene (cached on the file's identity and mtime)."""
+    """The current frame of a project's scene (cached on the file's identity: inode,
+    modification time and size, taken from the very read the frame is parsed from)."""
     path = scene_path(data_dir, scene)
     if path is None:
         return None
@@ -65,12 +68,25 @@ def scene_frame(data_dir: Path | None, scene: str | None) -> SceneFrame | None:
     if hit is not None and hit[0] == key:
         state = hit[1]
     else:
-        state = read_scene_georef(path)
+        doc, key = read_tileset_snapshot(path)
+        state = scene_georef_of(path, doc)
         with _lock:
             _cache[path] = (key, state)
+    return frame_of(state)
+
+
+def frame_of(state: SceneGeoref) -> SceneFrame:
+    """The scene frame of a georeference state."""
     frame = None if state.frame_covariance is None else \
         FrameCovariance.from_json(state.frame_covariance)
     return SceneFrame(state.version, state.root_transform, frame, state)
+
+
+def scene_frame_and_bytes(path: Path) -> tuple[SceneFrame, bytes]:
+    """The scene frame of tileset.json ``path`` and the bytes it was read from (one read:
+    what a change puts back on failure is what its frame was taken from)."""
+    raw = path.read_bytes()
+    return frame_of(scene_georef_from_bytes(path, raw)), raw
 
 
 def frame_record(ctx: SceneFrame | None, version: int | None = None) -> JSONObject | None:
@@ -88,6 +104,45 @@ def frame_record(ctx: SceneFrame | None, version: int | None = None) -> JSONObje
         raise InputError(f"the scene has no georeference version {v} (now {ctx.version})",
                          field="georef_version")
     return {"version": v, "root_transform": column_major(root)}
+
+
+#: A point farther than this many scene extents (plus MARGIN_M) from the scene's centre in
+#: the frame its rays are said to be of, yet within the scene in another version's frame,
+#: was taken under that other version.
+EXTENTS = 3.0
+MARGIN_M = 100.0
+
+
+def check_stated_frame(ctx: SceneFrame | None, stated: int | None,
+                       point_ecef: FloatArray | None) -> None:
+    """Refuse (ConflictError about ``georef_version``) a point whose rays, said to be taken
+    under georeference version ``stated``, put it outside the scene while another version
+    of the scene's frame puts it inside: the client built its rays from another version
+    than it states (e.g. a transform and a version read from two files). ``point_ecef``:
+    the point as measured now (the scene's current frame). Nothing is said where it cannot
+    be told (no scene, no bounds, no point, the point outside the scene in every frame)."""
+    if ctx is None or stated is None or point_ecef is None or ctx.state.extent_m is None:
+        return
+    then = ctx.state.root_of(int(stated))
+    if then is None:
+        return
+    limit = EXTENTS * ctx.state.extent_m + MARGIN_M
+    y = np.append(np.asarray(point_ecef, dtype=np.float64), 1.0)
+    y_stated = then @ np.linalg.solve(ctx.root, y)  # the point in the stated version's frame
+
+    def off(root: FloatArray) -> float:
+        return float(np.linalg.norm(np.linalg.solve(root, y_stated)[:3]))
+
+    if off(then) <= limit:
+        return
+    fits = [int(h["version"]) for h in ctx.state.history
+            if isinstance(h.get("version"), int) and off(matrix4(h["root_transform"])) <= limit]
+    if fits:
+        raise ConflictError(
+            f"the rays put the point {off(then):.0f} m from the scene in georeference version "
+            f"{stated}, but inside it in version {fits[-1]}: they were taken under version "
+            f"{fits[-1]} (the scene is now at version {ctx.version}); state the version the "
+            "rays' scene transform came from", field="georef_version")
 
 
 def carry(frame: JSONObject | None, ctx: SceneFrame | None) -> FloatArray | None:
@@ -135,7 +190,7 @@ def reference_from(cps: Sequence[CheckPointRecord]) -> Reference:
 def restore_on_failure(path: Path, before: bytes, exc: BaseException) -> None:
     """Put tileset.json back as it was when the store could not follow a georeference change
     (the store's transaction is rolled back by the caller)."""
-    tmp = path.with_name(f".tileset.restore.{threading.get_ident()}.tmp")
+    tmp = path.with_name(f".tileset.{os.getpid()}.restore{threading.get_ident()}.tmp")
     try:
         tmp.write_bytes(before)
         tmp.replace(path)

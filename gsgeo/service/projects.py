@@ -36,12 +36,14 @@ from gsgeo.service.checkpoints import FORMATS, CheckPointRow, format_from_name, 
 from gsgeo.service.georeferencing import (
     SceneFrame,
     carry,
+    check_stated_frame,
     frame_record,
     measured_from,
     rays_now,
     reference_from,
     restore_on_failure,
     scene_frame,
+    scene_frame_and_bytes,
     scene_path,
 )
 from gsgeo.service.measuring import (
@@ -88,6 +90,12 @@ MAX_FEATURE_POINTS = 10_000
 #: Stored points measured at once in a re-measure: blocks large enough for the vectorised
 #: batch, small enough that the store's writer has work while the next block is measured.
 REMEASURE_BLOCK = 1000
+
+
+def _ecef(pt: PointRecord) -> FloatArray | None:
+    """A measured point's ECEF position (the scene's current frame), None when unsolved."""
+    got = None if pt.result is None else pt.result.get("point_ecef")
+    return None if got is None else np.asarray(got, dtype=np.float64)
 
 
 def _text(value: JSON, field: str, max_len: int = 2000) -> str:
@@ -460,6 +468,7 @@ class Projects(BuildingService):
                          frame=frame_record(ctx, new.georef_version),
                          measured_by=audit.current_actor())
         self._measure_into(pt, p, strict=True, rays=new.rays, ctx=ctx)
+        check_stated_frame(ctx, new.georef_version, _ecef(pt))
         with self.store.transaction() as tx:
             now = self._project(tx, pid)
             ctx_now = scene_frame(self.data_dir, now.scene)
@@ -467,6 +476,7 @@ class Projects(BuildingService):
                     (p.scene, p.settings_rev, None if ctx is None else ctx.version):
                 pt.frame = frame_record(ctx_now, new.georef_version)
                 self._measure_into(pt, now, strict=True, rays=new.rays, ctx=ctx_now)
+                check_stated_frame(ctx_now, new.georef_version, _ecef(pt))
             if point_id is None:
                 pt.id = self._next_id(tx.point_ids(pid))
                 if pt.result is not None:  # always, once measured strictly
@@ -558,6 +568,9 @@ class Projects(BuildingService):
                 return pt  # it changes nothing: no new version, no entry in the trail
             if remeasure or pt.solved_rev != p.settings_rev:
                 self._measure_into(pt, p, strict=True, rays=typed)
+                if typed is not None:
+                    check_stated_frame(scene_frame(self.data_dir, p.scene),
+                                       georef_version(changes.get("georef_version")), _ecef(pt))
             elif pt.result is not None:
                 pt.result.update({"point_id": pt.id, "code": pt.code,
                                   "description": pt.description})
@@ -776,8 +789,9 @@ class Projects(BuildingService):
         history = [] if ctx is None else [
             {k: h.get(k) for k in ("version", "kind", "at", "parent", "restores",
                                    "georeferenced")}
-            | {"scale": (h.get("summary") or {}).get("scale")} for h in ctx.state.history]
-        entry = None if ctx is None else ctx.state.entry()
+            | {"scale": h["scale"] if "scale" in h else (h.get("summary") or {}).get("scale")}
+            for h in ctx.state.history]
+        current = None if ctx is None else ctx.state.record()["summary"]
         return json_ready({
             "scene": p.scene, "version": 0 if ctx is None else ctx.version,
             "georeferenced": False if ctx is None else ctx.state.georeferenced,
@@ -785,7 +799,7 @@ class Projects(BuildingService):
             "control": [{"id": c.id, "x": c.x, "y": c.y, "z": c.z, "crs": c.crs,
                          "sigma_h": c.sigma_h, "sigma_v": c.sigma_v,
                          "measured": c.id in solved} for c in cps],
-            "current": None if entry is None else entry.get("summary")})
+            "current": current})
 
     def _georef_solution(self, tx: Transaction, p: Project, ctx: SceneFrame | None,
                          exclude: Sequence[str],
@@ -834,7 +848,8 @@ class Projects(BuildingService):
                                      summary=json_ready(summary),
                                      georeferenced=report["kind"] != "scale"
                                      or ctx.state.georeferenced,
-                                     expect_version=ctx.version)
+                                     expect_version=ctx.version,
+                                     by=author(p.id, "georeferenced"))
             return dict(report) | {
                 "applied": True,
                 "scene": {"name": p.scene, "version": state.version,
@@ -847,7 +862,7 @@ class Projects(BuildingService):
     def undo_georeference(self, pid: str) -> JSONObject:
         """Restore the scene's previous georeference and re-measure every project on it."""
         def restore(_tx: Transaction, _p: Project, path: Path, _ctx: SceneFrame) -> JSONObject:
-            state, sim = undo_scene(path)
+            state, sim = undo_scene(path, by=author(_p.id, "georeference undone"))
             return {"version": state.version, "georeferenced": state.georeferenced,
                     "root_transform": column_major(state.root_transform),
                     "similarity": column_major(sim)}
@@ -866,15 +881,14 @@ class Projects(BuildingService):
             with self.store.transaction() as tx:
                 p = self._project(tx, pid)
                 path = scene_path(self.data_dir, p.scene)
-                ctx = scene_frame(self.data_dir, p.scene)
-                if path is None or ctx is None:
+                if path is None:
                     raise InputError(f"project '{pid}' has no scene to georeference",
                                      field="scene")
-                before = path.read_bytes()
+                ctx, before = scene_frame_and_bytes(path)  # one read: the frame and its bytes
                 out = change(tx, p, path, ctx)
                 written = (path, before)
-                n = self._remeasure_scene(tx, p.scene, ctx, pid)
                 now = scene_frame(self.data_dir, p.scene)
+                n = self._remeasure_scene(tx, p.scene, ctx, now, pid)
                 audit.record(tx, pid, action, "scene", p.scene,
                              {"version": ctx.version, "root_transform": column_major(ctx.root)},
                              {"version": None if now is None else now.version,
@@ -887,11 +901,11 @@ class Projects(BuildingService):
         return out, n
 
     def _remeasure_scene(self, tx: Transaction, scene: str | None, before: SceneFrame,
-                         origin: str) -> int:
-        """Re-measure every point of every project on ``scene`` in the scene's new frame;
-        points without a recorded frame are pinned to the one ``before`` the change. The
-        projects other than ``origin`` (whose change it is) get a "re-solved" audit entry."""
-        ctx = scene_frame(self.data_dir, scene)
+                         ctx: SceneFrame | None, origin: str) -> int:
+        """Re-measure every point of every project on ``scene`` in the scene's new frame
+        ``ctx``; points without a recorded frame are pinned to the one ``before`` the change.
+        The projects other than ``origin`` (whose change it is) get a "re-solved" audit
+        entry."""
         pinned: JSONObject = {"version": before.version,
                               "root_transform": column_major(before.root)}
         n = 0
@@ -925,10 +939,37 @@ class Projects(BuildingService):
             was = p.scene_version
             m = self._remeasure_stored(tx, p, ctx)
             tx.update_project(p)
-            audit.record(tx, pid, "re-solved", "scene", p.scene, {"version": was},
-                         {"version": p.scene_version, "remeasured_points": m,
-                          "reason": "the scene's georeference changed outside the store"})
+            self._record_catch_up(tx, p, ctx, was, m)
         return True
+
+    @staticmethod
+    def _record_catch_up(tx: Transaction, p: Project, ctx: SceneFrame, was: int,
+                         remeasured: int) -> None:
+        """The trail of a catch-up to the scene's version: credited to the change's author
+        when the version records one (a change whose store transaction never committed,
+        e.g. killed after writing tileset.json), else to nobody but the reader."""
+        try:
+            by = ctx.state.record().get("by")
+        except InputError:
+            by = None  # its side file is gone: the author is not known
+        after: JSONObject = {"version": ctx.version, "remeasured_points": remeasured,
+                             "caught_up_by": audit.current_actor()}
+        if not isinstance(by, dict) or not isinstance(by.get("user"), str):
+            audit.record(tx, p.id, "re-solved", "scene", p.scene, {"version": was},
+                         after | {"reason": "the scene's georeference changed outside the "
+                                            "store"})
+            return
+        with audit.acting_as(by["user"]):
+            if by.get("project") == p.id and by.get("action") in ("georeferenced",
+                                                                  "georeference undone"):
+                audit.record(tx, p.id, str(by["action"]), "scene", p.scene,
+                             {"version": was},
+                             after | {"reason": "recorded when the next reader caught up: "
+                                                "the change's own transaction did not commit"})
+            else:
+                audit.record(tx, p.id, "re-solved", "scene", p.scene, {"version": was},
+                             after | {"by_project": by.get("project"),
+                                      "reason": f"{by.get('action')} by another project"})
 
     # check points ---------------------------------------------------------------------
     def list_check_points(self, pid: str) -> list[CheckPointRecord]:
@@ -937,9 +978,12 @@ class Projects(BuildingService):
             return tx.list_check_points(pid)
 
     def add_check_points(self, pid: str, rows: list[CheckPointRow], crs: str, *,
-                         role: str = "check", source: str = "", replace: bool = False) -> int:
+                         role: str = "check", source: str = "", replace: bool = False,
+                         overwrite: Collection[str] = ()) -> int:
         """Store check points given in ``crs`` (all or nothing); ``replace`` drops the old ones.
-        A repeated id is an InputError about ``points``."""
+        A repeated id is an InputError about ``points``; an id already stored is a
+        ConflictError naming the ids (nothing stored) unless ``overwrite`` holds it: then the
+        stored point is replaced, its role and source too, by what this write states."""
         from gsgeo.crs.resolve import parse_crs
 
         ids = [r.id for r in rows]
@@ -952,27 +996,43 @@ class Projects(BuildingService):
             parse_crs(crs)
         except CRSError as exc:
             raise exc.within("crs") from None
+        allowed = {item_id(i, "overwrite") for i in overwrite}
+        source = _text(source, "source", 300)
         recs = [CheckPointRecord(project_id=pid, id=r.id, x=r.x, y=r.y, z=r.z, crs=crs.strip(),
-                                 role=role, source=_text(source, "source", 300),
+                                 role=role, source=source,
                                  sigma_h=r.sigma_h, sigma_v=r.sigma_v) for r in rows]
         with self.store.transaction() as tx:
             self._project(tx, pid)
-            # what the import drops (replace) or overwrites (the same id), for the trail
             given = set(ids)
-            gone = [audit.check_point_values(c) for c in tx.list_check_points(pid)
-                    if replace or c.id in given]
+            stored = [] if replace else [c for c in tx.list_check_points(pid) if c.id in given]
+            refused = [c for c in stored if c.id not in allowed]
+            if refused:
+                raise ConflictError(
+                    f"{len(refused)} id(s) already stored: "
+                    + ", ".join(f"'{c.id}' ({c.role}, {c.crs}"
+                                + (f", source '{c.source}'" if c.source else "") + ")"
+                                for c in refused[:20])
+                    + ("; ..." if len(refused) > 20 else "")
+                    + "; nothing stored. Name them in 'overwrite' to replace them, or "
+                    "choose other ids", ids=[c.id for c in refused], field="points")
+            # what the import drops (replace) or overwrites (asked for by id), for the trail
+            gone = [audit.check_point_values(c) for c in
+                    (tx.list_check_points(pid) if replace else stored)]
             replaced = tx.delete_all_check_points(pid) if replace else 0
             tx.upsert_check_points(recs)
             before: JSONObject | None = {"replaced": replaced} if replace else None
             if gone:
                 before = (before or {}) | {"points": gone}
-            audit.record(tx, pid, f"{role} points imported", "check point", None, before,
-                         {"ids": ids, "crs": crs.strip(), "role": role, "source": source[:300]})
+            after: JSONObject = {"ids": ids, "crs": crs.strip(), "role": role, "source": source}
+            if stored:
+                after["overwritten"] = [c.id for c in stored]
+            audit.record(tx, pid, f"{role} points imported", "check point", None, before, after)
         return len(recs)
 
     def import_check_point_file(self, pid: str, data: bytes, filename: str | None, *,
                                 crs: str | None = None, fmt: str | None = None,
-                                role: str = "check", replace: bool = False) -> tuple[int, str, str]:
+                                role: str = "check", replace: bool = False,
+                                overwrite: Collection[str] = ()) -> tuple[int, str, str]:
         """Check points from a CSV, GeoJSON or GeoPackage file (format from ``fmt`` or the
         file name; CRS from ``crs``, else the file's, else EPSG:4979 for GeoJSON).
         Returns (number stored, CRS, format)."""
@@ -986,7 +1046,7 @@ class Projects(BuildingService):
             raise InputError("state the CRS the file's coordinates are in, e.g. EPSG:27700",
                              field="crs")
         n = self.add_check_points(pid, rows, crs, role=role, replace=replace,
-                                  source=(filename or "")[:300])
+                                  overwrite=overwrite, source=(filename or "")[:300])
         return n, crs, fmt
 
     def delete_check_point(self, pid: str, cid: str) -> None:
@@ -1043,6 +1103,12 @@ class Projects(BuildingService):
                           "points in a projected CRS are compared as given and must be in the "
                           f"project's height system ({', '.join(height_types) or 'none'})")
         return json_ready(rep)
+
+
+def author(pid: str, action: str) -> JSONObject:
+    """Who makes a scene change, as the scene's history keeps it: the current actor, the
+    project and the action (the trail's words)."""
+    return {"user": audit.current_actor(), "project": pid, "action": action}
 
 
 def check_points_in_grid(cps: list[CheckPointRecord], project: Project,

@@ -21,7 +21,13 @@ class NotFoundError(GsgeoError, LookupError):
 
 
 class ConflictError(InputError):
-    """The change clashes with what is stored, e.g. a duplicate id (HTTP 409)."""
+    """The change clashes with what is stored, e.g. a duplicate id (HTTP 409). ``ids``: the
+    stored items it clashes with, when there are such (the API's 409 lists them)."""
+
+    def __init__(self, problem: str = "", *, ids: Collection[str] = (),
+                 field: str | None = None, source: str | None = None) -> None:
+        super().__init__(problem, field=field, source=source)
+        self.ids = list(ids)
 
 
 class PreconditionFailed(ConflictError):

@@ -80,10 +80,11 @@ def read_tileset(path: str | os.PathLike) -> Splats:
     return Splats.concatenate(parts)
 
 
-def splat_count(path: str | os.PathLike) -> int:
-    """Number of splats in a tileset, from the glTF accessor counts (no decoding)."""
+def splat_count(path: str | os.PathLike | Tileset) -> int:
+    """Number of splats in a tileset (its path, or the tileset already read), from the glTF
+    accessor counts (no decoding)."""
     total = 0
-    for tile in Tileset(path).tiles():
+    for tile in (path if isinstance(path, Tileset) else Tileset(path)).tiles():
         for p in tile.content_paths:
             gltf, _ = read_gltf_json(_json_head(p), str(p))
             for mesh in gltf.get("meshes", []):

@@ -44,7 +44,9 @@ X_UP_TO_Z_UP = np.array([[0, 0, -1.0, 0], [0, 1.0, 0, 0], [1.0, 0, 0, 0], [0, 0,
 MAX_NESTING = 32
 
 __all__ = ["MAX_NESTING", "X_UP_TO_Z_UP", "Y_UP_TO_Z_UP", "GltfContent", "Tile", "Tileset",
-           "read_content", "read_gltf_json", "read_tileset_json", "up_axis_turn"]
+           "parse_tileset_json", "read_content", "read_gltf_json", "read_tileset_json",
+           "read_tileset_snapshot",
+           "up_axis_turn"]
 
 
 def up_axis_turn(asset: dict) -> np.ndarray:
@@ -188,11 +190,12 @@ class Tileset:
     """A tileset.json with every tile's computed transform (3D Tiles 1.0 and 1.1), external
     tilesets followed."""
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], doc: dict | None = None) -> None:
+        """``doc``: the document of ``path`` already read (one read serves several uses)."""
         p = Path(path)
         if p.is_dir():
             p = p / "tileset.json"
-        doc = read_tileset_json(p)
+        doc = read_tileset_json(p) if doc is None else doc
         self.path = p
         self.doc = doc
         asset = doc.get("asset", {})
@@ -322,11 +325,31 @@ class Tileset:
 def read_tileset_json(p: Path) -> dict:
     """The JSON document of a tileset.json; InputError when missing, unreadable or without
     a root."""
+    return read_tileset_snapshot(p)[0]
+
+
+def read_tileset_snapshot(p: Path) -> tuple[dict, tuple[int, int, int]]:
+    """The JSON document of a tileset.json and the identity of the file version it came from
+    (inode, modification time in ns, size), both from one open of the file: a tileset
+    replaced meanwhile (an atomic rename) gives the old document with the old identity or
+    the new with the new, never a mix. InputError as :func:`read_tileset_json`."""
     try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
+        with open(p, "rb") as f:
+            st = os.fstat(f.fileno())
+            raw = f.read()
     except FileNotFoundError:
         raise InputError(f"{p}: no such tileset") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except OSError as exc:
+        raise InputError(f"{p}: not a readable tileset.json ({exc})") from None
+    return parse_tileset_json(raw, p), (st.st_ino, st.st_mtime_ns, st.st_size)
+
+
+def parse_tileset_json(raw: bytes, p: Path) -> dict:
+    """The JSON document of the bytes of tileset.json ``p``; InputError as
+    :func:`read_tileset_json`."""
+    try:
+        doc = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"{p}: not a readable tileset.json ({exc})") from None
     if not isinstance(doc, dict) or "root" not in doc:
         raise InputError(f"{p}: not a 3D Tiles tileset (no 'root')")

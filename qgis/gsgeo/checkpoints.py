@@ -29,11 +29,41 @@ def crs_text(crs: QgsCoordinateReferenceSystem, has_z: bool) -> str:
     return authid or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED)
 
 
-def payload(points: list[dict[str, Any]], crs: str, role: str) -> dict[str, Any]:
-    """The request body: ``points`` as [{id, x, y[, z]}], their CRS and role."""
+def payload(points: list[dict[str, Any]], crs: str, role: str,
+            source: str = "") -> dict[str, Any]:
+    """The request body: ``points`` as [{id, x, y[, z]}], their CRS, role and source."""
     if role not in ("check", "control"):
         raise ValueError(f"role must be 'check' or 'control', got '{role}'")
-    return {"crs": crs, "role": role, "points": points}
+    body: dict[str, Any] = {"crs": crs, "role": role, "points": points}
+    if source:
+        body["source"] = source[:300]
+    return body
+
+
+def describe(p: dict[str, Any], crs: str, role: str, source: str) -> str:
+    """One point as the user is shown it: role, coordinates, CRS and source."""
+    z = "" if p.get("z") is None else f", {p['z']}"
+    return f"{role} ({p['x']}, {p['y']}{z}) in {crs}" + (f", source '{source}'" if source else "")
+
+
+def replacement_question(body: dict[str, Any], stored: list[dict[str, Any]],
+                         ids: list[str]) -> str:
+    """What the user is asked before ``ids`` of ``stored`` are replaced by ``body``'s points:
+    each id's stored and new values."""
+    old = {str(c["id"]): c for c in stored}
+    new = {str(p["id"]): p for p in body["points"]}
+    lines = [f"{len(ids)} of these ids are already stored in the project. Replace them?", ""]
+    for i in ids:
+        lines.append(f"{i}:")
+        if i in old:
+            c = old[i]
+            lines.append("  stored: " + describe(c, str(c.get("crs")), str(c.get("role")),
+                                                 str(c.get("source") or "")))
+        if i in new:
+            lines.append("  new:    " + describe(new[i], str(body["crs"]), str(body["role"]),
+                                                 str(body.get("source") or "")))
+    lines += ["", "No: nothing is sent."]
+    return "\n".join(lines)
 
 
 def feature_name(feature: Any, fields: list[str]) -> str:
@@ -77,4 +107,5 @@ def layer_payload(layer: QgsVectorLayer, role: str) -> tuple[dict[str, Any] | No
     if not points:
         return None, skipped
     has_z = any("z" in p for p in points)
-    return payload(points, crs_text(layer.crs(), has_z), role), skipped
+    return payload(points, crs_text(layer.crs(), has_z), role, f"QGIS layer '{layer.name()}'"), \
+        skipped

@@ -19,11 +19,14 @@ from qgis.PyQt.QtNetwork import QNetworkRequest
 
 
 class GsgeoApiError(Exception):
-    """A request to the gsgeo server failed; ``status`` is the HTTP status when there was one."""
+    """A request to the gsgeo server failed; ``status`` is the HTTP status when there was one,
+    ``ids`` the stored items a 409 names (e.g. check point ids already stored)."""
 
-    def __init__(self, message: str, status: int | None = None) -> None:
+    def __init__(self, message: str, status: int | None = None,
+                 ids: list[str] | None = None) -> None:
         super().__init__(message)
         self.status = status
+        self.ids = list(ids or [])
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,8 @@ class GsgeoClient:
                                 f"({net.errorMessage() or 'no reply'})")
         if int(status) >= 400:
             raise GsgeoApiError(f"{method} {url}: HTTP {int(status)}: "
-                                f"{server_message(raw, net.errorMessage())}", int(status))
+                                f"{server_message(raw, net.errorMessage())}", int(status),
+                                conflict_ids(raw))
         if not raw:
             return None
         try:
@@ -102,13 +106,30 @@ class GsgeoClient:
         return list(self.request("GET", "/ogc/collections")["collections"])
 
     def add_check_points(self, pid: str, payload: dict[str, Any]) -> dict[str, Any]:
-        """POST check or control points (payload as /api/projects/{pid}/checkpoints takes it)."""
+        """POST check or control points (payload as /api/projects/{pid}/checkpoints takes it).
+        An id already stored and not in the payload's ``overwrite`` is refused: a
+        GsgeoApiError with status 409 and those ``ids``."""
         return dict(self.request("POST", f"/api/projects/{quote(pid)}/checkpoints", payload))
+
+    def check_points(self, pid: str) -> list[dict[str, Any]]:
+        """The project's stored check and control points, as given (id, x, y, z, crs, role,
+        source, ...)."""
+        return list(self.request("GET", f"/api/projects/{quote(pid)}/checkpoints")["check_points"])
 
 
 def quote(part: str) -> str:
     """One URL path segment, escaped."""
     return urllib.parse.quote(part, safe="")
+
+
+def conflict_ids(raw: bytes) -> list[str]:
+    """The ``ids`` a 409 body names, else none."""
+    try:
+        body = json.loads(raw or b"{}")
+    except ValueError:
+        return []
+    ids = body.get("ids") if isinstance(body, dict) else None
+    return [str(i) for i in ids] if isinstance(ids, list) else []
 
 
 def server_message(raw: bytes, fallback: str) -> str:

@@ -9,10 +9,10 @@ from typing import Any
 from qgis.core import Qgis, QgsProject, QgsVectorLayer
 from qgis.PyQt.QtCore import QTimer, QUrl
 from qgis.PyQt.QtGui import QDesktopServices
-from qgis.PyQt.QtWidgets import QAction, QToolBar
+from qgis.PyQt.QtWidgets import QAction, QMessageBox, QToolBar
 
 from .auth import BearerToken
-from .checkpoints import layer_payload
+from .checkpoints import layer_payload, replacement_question
 from .client import Connection, GsgeoApiError, GsgeoClient
 from .dialog import ConnectDialog
 from .layers import PROP_PROJECT, add_project_layers, refresh_layers
@@ -46,6 +46,7 @@ class GsgeoPlugin:
         self.toolbar: QToolBar | None = None
         self.map_tool: OpenViewerTool | None = None
         self.open_url: Callable[[str], None] = open_in_browser
+        self.ask: Callable[[str, str], bool] = self.ask_user
 
     # QGIS's plugin interface -------------------------------------------------------------
     def initGui(self) -> None:  # the name QGIS calls
@@ -87,6 +88,13 @@ class GsgeoPlugin:
     # what the actions do -----------------------------------------------------------------
     def say(self, text: str, level: Qgis.MessageLevel = Qgis.MessageLevel.Info) -> None:
         self.iface.messageBar().pushMessage("gsgeo", text, level=level, duration=8)
+
+    def ask_user(self, title: str, text: str) -> bool:
+        """A Yes/No question to the user (No by default); whether they said Yes."""
+        answer = QMessageBox.question(self.iface.mainWindow(), title, text,
+                                      QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No,
+                                      QMessageBox.StandardButton.No)
+        return bool(answer == QMessageBox.StandardButton.Yes)
 
     def client(self) -> GsgeoClient:
         return GsgeoClient(self.connection)
@@ -181,11 +189,24 @@ class GsgeoPlugin:
         if not pid:
             self.say("Connect and choose a project first.", Qgis.MessageLevel.Warning)
             return None
+        replaced = ""
         try:
-            answer = self.client().add_check_points(pid, body)
+            try:
+                answer = self.client().add_check_points(pid, body)
+            except GsgeoApiError as exc:
+                if exc.status != 409 or not exc.ids:
+                    raise
+                # ids already stored: replaced only when the user says so, seeing both
+                question = replacement_question(body, self.client().check_points(pid), exc.ids)
+                if not self.ask("gsgeo: replace stored points?", question):
+                    self.say(f"Nothing sent: {', '.join(exc.ids)} already stored in '{pid}' "
+                             "and not replaced.", Qgis.MessageLevel.Warning)
+                    return None
+                answer = self.client().add_check_points(pid, body | {"overwrite": exc.ids})
+                replaced = f"; replaced {', '.join(exc.ids)}"
         except GsgeoApiError as exc:
             self.say(str(exc), Qgis.MessageLevel.Critical)
             return None
-        self.say(f"Sent {answer.get('imported', 0)} {role} point(s) to '{pid}'{note}.")
+        self.say(f"Sent {answer.get('imported', 0)} {role} point(s) to '{pid}'{replaced}{note}.")
         refresh_layers(QgsProject.instance())
         return answer
