@@ -35,8 +35,10 @@ def ensure_project(data_dir: str | os.PathLike, build: DemoBuild) -> tuple[Proje
                                               description=DESCRIPTION, scene=SCENE_NAME,
                                               crs=place.CRS, sigma_px=1.0)
         rows = [CheckPointRow(t.id, t.easting, t.northing, t.height) for t in truth_points()]
+        # a rebuild states the same truth again: its ids are replaced by name, not refused
         n = projects.add_check_points(project.id, rows, place.CRS,
-                                      source=f"gsgeo demo ground truth ({build.checkpoints_csv.name})")
+                                      source=f"gsgeo demo ground truth ({build.checkpoints_csv.name})",
+                                      overwrite=[r.id for r in rows])
     finally:
         store.close()
     return project, n
@@ -65,8 +67,10 @@ def ensure_local_project(data_dir: str | os.PathLike, build: LocalBuild) -> tupl
             project = projects.create_project(name=LOCAL_PROJECT_NAME, id=LOCAL_PROJECT_ID,
                                               description=LOCAL_DESCRIPTION,
                                               scene=LOCAL_SCENE_NAME, crs=place.CRS, sigma_px=1.0)
+        truth_ids = [t.id for t in place.truth_points()]  # a rebuild replaces its own points
         counts = [projects.import_check_point_file(project.id, path.read_bytes(), path.name,
-                                                   crs=place.CRS, role=role)[0]
+                                                   crs=place.CRS, role=role,
+                                                   overwrite=truth_ids)[0]
                   for role, path in (("control", build.control_csv),
                                      ("check", build.checkpoints_csv))]
     finally:

@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
 import time
 from pathlib import Path
 
 from gsgeo import __version__
 from gsgeo.errors import InputError
+from gsgeo.tiles.georefhistory import FIT_DIR
 
 #: The file that marks a tileset directory as written by gsgeo.
 MARKER = ".gsgeo-tileset"
@@ -63,6 +65,12 @@ def foreign_entries(folder: Path) -> list[str]:
     with os.scandir(folder) as it:
         for e in it:
             if e.name in (MARKER, "tileset.json") and e.is_file(follow_symlinks=False):
+                continue
+            if e.name == FIT_DIR and e.is_dir(follow_symlinks=False):
+                # the georeference versions' side files (gsgeo.tiles.georefhistory)
+                with os.scandir(e.path) as fits:
+                    odd += [f"{FIT_DIR}/{f.name}" for f in fits
+                            if not (re.fullmatch(r"v\d+\.json", f.name) and f.is_file(follow_symlinks=False))]
                 continue
             if e.name == "tiles" and e.is_dir(follow_symlinks=False):
                 with os.scandir(e.path) as tiles:
