@@ -40,3 +40,13 @@ def white_sculpture_rebuilt(tmp_path_factory):
 
     work = tmp_path_factory.mktemp("white-sculpture-rebuilt")
     return work / "ours", rebuild_ply_and_tiles(WHITE_SCULPTURE, work, work / "ours")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Groups for pytest-xdist's ``--dist loadgroup`` (pyproject.toml's addopts): the browser
+    tests all on one worker (they share one Chromium, one demo and one box scene, and two
+    SwiftShader renderers at once would only slow each other), every other module whole on
+    one worker (its module fixtures, servers and demo builds among them, made once)."""
+    for item in items:
+        browser = item.get_closest_marker("e2e") is not None and "e2e" in item.path.parts
+        item.add_marker(pytest.mark.xdist_group("browser" if browser else item.path.stem))

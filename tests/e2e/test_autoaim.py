@@ -57,6 +57,9 @@ def server(demo_server):
 @pytest.fixture(scope="module")
 def page(server, browser):
     pg = browser.new_page(viewport=VIEWPORT)
+    # a frame of the demo's 341 816 splats takes seconds in SwiftShader, more on a busy machine:
+    # waits are for correctness here, speed is benchmarks/autoaim.py's
+    pg.set_default_timeout(120_000)
     errors: list[str] = []
     pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
     pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
