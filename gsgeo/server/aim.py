@@ -21,10 +21,11 @@ from gsgeo.measure import Rays as RayArrays
 from gsgeo.server.api import ErrorBody
 from gsgeo.server.models import Mat16, Ray, rays_of
 from gsgeo.server.scenes import SceneFolders
+from gsgeo.server.textbody import TextCheckedRoute
 from gsgeo.service import ConflictError, NotFoundError
 from gsgeo.service.aiming import depth_on_ray, match_views, views_for_point
 
-router = APIRouter(prefix="/api", tags=["aiming"], responses={
+router = APIRouter(prefix="/api", route_class=TextCheckedRoute, tags=["aiming"], responses={
     404: {"model": ErrorBody, "description": "no such scene"},
     409: {"model": ErrorBody, "description": "the scene's tiles are on a static host, not here"},
     413: {"model": ErrorBody, "description": "request body over the size limit"},
