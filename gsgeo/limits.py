@@ -177,3 +177,32 @@ def check_json_text(doc: Any, field: str | None = None) -> None:
         elif isinstance(value, list):
             stack.extend((item, f"{where or ''}[{i}]") for i, item in reversed(
                 list(enumerate(value))))
+
+
+#: A number as text: ASCII digits, an optional sign, point and exponent. Python's float()
+#: and int() also take Unicode digits ("١٠"), underscores ("1_000"), blanks, "nan" and
+#: "inf"; no input edge takes those.
+_NUMBER_TEXT = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_INTEGER_TEXT = re.compile(r"[0-9]+")
+MAX_INTEGER_DIGITS = 4000  # Python's int() refuses more than 4300
+
+
+def number_text(text: str, field: str | None) -> float:
+    """A finite number written in ASCII decimal notation (``-1.5``, ``.5``, ``2e3``), or
+    InputError naming ``field``."""
+    if not _NUMBER_TEXT.fullmatch(text):
+        raise InputError(f"{text[:40]!r} is not a number (write ASCII digits, e.g. -1.25 or "
+                         "2e3)", field=field)
+    v = float(text)
+    if not math.isfinite(v):
+        raise InputError(f"{text[:40]!r} is too large a number", field=field)
+    return v
+
+
+def integer_text(text: str, field: str | None) -> int:
+    """A non-negative integer written with ASCII digits only, or InputError
+    naming ``field``."""
+    if not _INTEGER_TEXT.fullmatch(text) or len(text) > MAX_INTEGER_DIGITS:
+        raise InputError(f"{text[:40]!r} is not a whole number of at most "
+                         f"{MAX_INTEGER_DIGITS} ASCII digits", field=field)
+    return int(text)
