@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from gsgeo.commands.argtypes import integer
 from gsgeo.crs.discovery import KINDS, describe_crs, search_crs
 from gsgeo.errors import InputError
 
@@ -22,7 +23,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--kind", action="append", choices=sorted(KINDS),
                    help="kinds to list (repeatable); default projected and compound")
     s.add_argument("--all", action="store_true", help="include deprecated CRSs and every authority")
-    s.add_argument("--limit", type=int, default=40, help="at most this many rows (default 40)")
+    s.add_argument("--limit", type=integer, default=40, help="at most this many rows (default 40)")
     s.add_argument("--json", action="store_true", help="print JSON")
     s.set_defaults(run=run_search)
     i = csub.add_parser("info", help="units, axes, datum, area and the operation from WGS 84",

@@ -20,6 +20,7 @@ import numpy as np
 from gsgeo.commands.storearg import add_store_argument, store_url
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSONObject
+from gsgeo.limits import number_text
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -81,8 +82,8 @@ def _distances(texts: list[str]) -> list[Any]:
             raise InputError(f"--distance {text!r}: expected A,B,METRES or A,B,METRES,SIGMA",
                              field=f"distance[{k}]")
         try:
-            nums = [float(v) for v in parts[2:]]
-        except ValueError:
+            nums = [number_text(v, None) for v in parts[2:]]
+        except InputError:
             raise InputError(f"--distance {text!r}: METRES and SIGMA must be numbers") from None
         out.append(Distance(parts[0], parts[1], nums[0], nums[1] if len(nums) > 1 else None))
     return out
