@@ -49,3 +49,15 @@ def test_check_point_csv_numbers_are_strict(cell):
     data = f"id,x,y,z\nC1,{cell},180000,5\n".encode()
     with pytest.raises(InputError, match="line 2"):
         read_check_points(data, "csv", "c.csv")
+
+
+@pytest.mark.parametrize("argv", [
+    ["report", "p\udcff", "-o", "x.pdf"],            # a non-UTF-8 byte, as Python decodes argv
+    ["georef", "--project", "p\udcff"],
+    ["users", "add", "n\udcff", "--role", "viewer"],
+    ["users", "remove", "n\udcff"],
+    ["crs", "search", "w\udcff"],
+])
+def test_text_arguments_that_are_not_text_are_refused(capsys, argv):
+    code, err = run(capsys, *argv)
+    assert code == 2 and "U+DCFF" in err, err

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 
 from gsgeo.errors import InputError
-from gsgeo.limits import integer_text, number_text
+from gsgeo.limits import integer_text, number_text, text_problem
 
 
 def integer(text: str) -> int:
@@ -28,3 +28,12 @@ def number(text: str) -> float:
         return number_text(text, None)
     except InputError as exc:
         raise argparse.ArgumentTypeError(exc.problem) from None
+
+
+def text(value: str) -> str:
+    """Text a name or id may be: no NUL, no unpaired surrogate (argv bytes that are not UTF-8
+    arrive as surrogates, which no store or library can encode)."""
+    problem = text_problem(value)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
+    return value

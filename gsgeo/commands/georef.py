@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from gsgeo.commands.argtypes import text as text_arg
 from gsgeo.commands.storearg import add_store_argument, store_url
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSONObject
@@ -33,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("session", nargs="?", default=None,
                    help="session JSON whose points include the measured control (or use "
                         "--project)")
-    p.add_argument("--project", default=None, metavar="PID",
+    p.add_argument("--project", default=None, type=text_arg, metavar="PID",
                    help="a stored project (its points and control points) instead of a session")
     p.add_argument("--data", default="gsgeo-data", metavar="DIR",
                    help="data directory of --project (as for gsgeo serve; default gsgeo-data)")
