@@ -118,3 +118,91 @@ def id_text(value: Any, field: str | None) -> str:
     if not v.strip():
         raise InputError("must not be empty", field=field)
     return v
+
+
+#: What no text may hold, anywhere: a NUL character (PostgreSQL's text cannot keep it, C
+#: libraries such as PROJ and GDAL stop reading at it) and unpaired surrogates (U+D800 to
+#: U+DFFF: not characters, so not encodable as UTF-8; JSON escapes such as "\ud800" and
+#: Python's surrogateescape can make them).
+_BAD_TEXT_CHAR = re.compile("[\x00\ud800-\udfff]")
+#: Where a JSON document's bytes may hold such text: an escaped NUL or surrogate, or the raw
+#: UTF-8 form of a surrogate (which Python's json decodes with "surrogatepass"). A quick
+#: screen only: a hit makes :func:`check_json_text` walk the document.
+_BAD_JSON_TEXT = re.compile(rb"\\u(?:[dD][89a-fA-F]|0000)|\xed[\xa0-\xbf]")
+
+
+def text_problem(text: str) -> str | None:
+    """Why ``text`` cannot be kept or passed on as text, or None: it holds a NUL character or
+    an unpaired surrogate (named with its position)."""
+    bad = _BAD_TEXT_CHAR.search(text)
+    if bad is None:
+        return None
+    c = bad.group()
+    what = ("a NUL character (U+0000), which no text may hold" if c == "\x00" else
+            f"an unpaired surrogate (U+{ord(c):04X}), which is not valid Unicode text")
+    return f"holds {what} (at character {bad.start() + 1})"
+
+
+def check_text(text: str, field: str | None) -> str:
+    """``text`` when :func:`text_problem` finds nothing wrong in it, else InputError naming
+    ``field``."""
+    problem = text_problem(text)
+    if problem is not None:
+        raise InputError(problem, field=field)
+    return text
+
+
+def json_text_may_be_bad(data: bytes) -> bool:
+    """Whether the JSON text ``data`` may decode to text :func:`text_problem` refuses (a fast
+    screen of the bytes; False means it cannot)."""
+    return _BAD_JSON_TEXT.search(data) is not None
+
+
+def check_json_text(doc: Any, field: str | None = None) -> None:
+    """InputError naming the JSON path (``points[0].code``) of the first string, or object
+    key, of the decoded JSON ``doc`` that :func:`text_problem` refuses."""
+    stack: list[tuple[Any, str | None]] = [(doc, field)]
+    while stack:
+        value, where = stack.pop()
+        if isinstance(value, str):
+            check_text(value, where)
+        elif isinstance(value, dict):
+            for key, item in reversed(value.items()):
+                name = key if isinstance(key, str) else str(key)
+                if text_problem(name) is not None:  # named escaped: a message must be text
+                    shown = name.encode("ascii", "backslashreplace").decode()
+                    check_text(name, f"{where}.{shown}" if where else shown)
+                at = f"{where}.{name}" if where else name
+                stack.append((item, at))
+        elif isinstance(value, list):
+            stack.extend((item, f"{where or ''}[{i}]") for i, item in reversed(
+                list(enumerate(value))))
+
+
+#: A number as text: ASCII digits, an optional sign, point and exponent. Python's float()
+#: and int() also take Unicode digits ("١٠"), underscores ("1_000"), blanks, "nan" and
+#: "inf"; no input edge takes those.
+_NUMBER_TEXT = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_INTEGER_TEXT = re.compile(r"[0-9]+")
+MAX_INTEGER_DIGITS = 4000  # Python's int() refuses more than 4300
+
+
+def number_text(text: str, field: str | None) -> float:
+    """A finite number written in ASCII decimal notation (``-1.5``, ``.5``, ``2e3``), or
+    InputError naming ``field``."""
+    if not _NUMBER_TEXT.fullmatch(text):
+        raise InputError(f"{text[:40]!r} is not a number (write ASCII digits, e.g. -1.25 or "
+                         "2e3)", field=field)
+    v = float(text)
+    if not math.isfinite(v):
+        raise InputError(f"{text[:40]!r} is too large a number", field=field)
+    return v
+
+
+def integer_text(text: str, field: str | None) -> int:
+    """A non-negative integer written with ASCII digits only, or InputError
+    naming ``field``."""
+    if not _INTEGER_TEXT.fullmatch(text) or len(text) > MAX_INTEGER_DIGITS:
+        raise InputError(f"{text[:40]!r} is not a whole number of at most "
+                         f"{MAX_INTEGER_DIGITS} ASCII digits", field=field)
+    return int(text)

@@ -183,3 +183,28 @@ def test_on_loopback_without_a_token_the_local_operator_acts(tmp_path, store_url
         assert c.delete(f"/api/projects/{pid}", headers=bearer(viewer)).status_code == 403
         users = [e["user"] for e in c.get(f"/api/projects/{pid}/audit").json()["entries"]]
         assert users == ["tom", "local", "local"]
+
+
+@pytest.mark.parametrize("path", ["/api/projects", "/api/info", "/ogc/collections",
+                                  "/scenes/none/tileset.json"])
+def test_on_loopback_a_wrong_or_revoked_token_is_refused(tmp_path, store_url, path):
+    """A request that presents a token is judged by it, on loopback too (401 when it is not
+    valid); without a token it stays the local operator's."""
+    with open_store(tmp_path / "data", store_url) as s:
+        revoked = accounts.add_user(s, "rita", "surveyor")
+        accounts.remove_user(s, "rita")
+        kept = accounts.add_user(s, "kim", "viewer")
+    with app_client(tmp_path, store_url, allowed_hosts={"testserver"}) as c:
+        assert c.get(path).status_code != 401
+        for headers in (bearer("gsgeo_wrong"), bearer(revoked), {"X-Gsgeo-Token": "nope"},
+                        {"Cookie": "gsgeo-token-80=stale"} if path.startswith("/scenes")
+                        else bearer("x")):
+            r = c.get(path, headers=headers)
+            assert r.status_code == 401, (headers, r.text)
+            assert "not valid" in r.json()["message"]
+            assert r.headers["www-authenticate"] == "Bearer"
+        r = c.post("/api/projects", json={"name": "x"}, headers=bearer(revoked))
+        assert r.status_code == 401
+        assert c.get("/api/projects").json()["projects"] == []  # nothing was written
+        assert c.get("/api/info", headers=bearer(kept)).json()["user"] == "kim"
+        assert c.get("/api/info").json()["user"] == "local"

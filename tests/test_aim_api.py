@@ -250,3 +250,39 @@ def test_views_for_the_scene_matcher_are_asked_by_shape_views(served):
         [v["azimuth_deg"] for v in plain.json()["views"]]
     r = client.post("/api/scenes/plane/views", json=_views_body(m, shape_views=[1]))
     assert r.status_code == 422 and "shape_views" in r.json()["message"], r.text
+
+
+# absurd numbers: finite, yet no point, camera or pixel of a scene --------------------------
+@pytest.mark.parametrize(("change", "field"), [
+    ({"point_ecef": [1e300, 0.0, 0.0]}, "point_ecef[0]"),
+    ({"point_ecef": [0.0, 0.0, -2e9]}, "point_ecef[2]"),
+    ({"point_ecef": [9e8, 9e8, 9e8]}, "point_ecef"),  # each axis in range, not the point
+])
+def test_views_of_an_absurd_point_are_422(served, change, field):
+    client, m = served
+    r = client.post("/api/scenes/plane/views", json=_views_body(m, **change))
+    assert r.status_code == 422, r.text
+    assert r.json()["field"] == field, r.text
+
+
+@pytest.mark.parametrize(("where", "value", "field"), [
+    (("reference", "camera", "position"), [1e300, 0.0, 0.0], "reference.camera.position"),
+    (("target", "camera", "position"), [0.0, -1e12, 0.0], "target.camera.position"),
+    (("reference", "camera", "direction"), [0.0, 0.0, 0.0], "reference.camera.direction"),
+    (("target", "camera", "up"), [1e-300, 0.0, 0.0], "target.camera.up"),
+    (("reference", "pixel"), [1e300, 5.0], "reference.pixel"),
+    (("target", "origin"), [-1e300, 5.0], "target.origin"),
+    (("depth", "normal_ecef"), [1e300, 0.0, 0.0], "depth.normal_ecef"),
+    (("depth", "normal_ecef"), [0.0, 0.0, 0.0], "depth.normal_ecef"),
+])
+def test_match_with_absurd_numbers_is_422_naming_the_field(served, where, value, field):
+    client, _ = served
+    body, _ = _match_body()
+    part = body
+    for key in where[:-1]:
+        part = part[key]
+    part[where[-1]] = value
+    for url in ("/api/match", "/api/scenes/plane/match"):
+        r = client.post(url, json=body)
+        assert r.status_code == 422, (url, r.text)
+        assert r.json()["field"].startswith(field), r.text

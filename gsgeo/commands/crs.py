@@ -6,6 +6,8 @@ import argparse
 import json
 import sys
 
+from gsgeo.commands.argtypes import integer
+from gsgeo.commands.argtypes import text as text_arg
 from gsgeo.crs.discovery import KINDS, describe_crs, search_crs
 from gsgeo.errors import InputError
 
@@ -18,11 +20,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s = csub.add_parser("search", help="list CRSs whose code or name matches TEXT",
                         description="List projected and compound CRSs (or --kind ...) whose "
                                     "code equals TEXT or whose name contains every word of it.")
-    s.add_argument("text", nargs="+", help="words of the name, or a code such as 27700")
+    s.add_argument("text", nargs="+", type=text_arg,
+                   help="words of the name, or a code such as 27700")
     s.add_argument("--kind", action="append", choices=sorted(KINDS),
                    help="kinds to list (repeatable); default projected and compound")
     s.add_argument("--all", action="store_true", help="include deprecated CRSs and every authority")
-    s.add_argument("--limit", type=int, default=40, help="at most this many rows (default 40)")
+    s.add_argument("--limit", type=integer, default=40, help="at most this many rows (default 40)")
     s.add_argument("--json", action="store_true", help="print JSON")
     s.set_defaults(run=run_search)
     i = csub.add_parser("info", help="units, axes, datum, area and the operation from WGS 84",

@@ -7,6 +7,7 @@ import os
 import sys
 from pathlib import Path
 
+from gsgeo.commands.argtypes import integer
 from gsgeo.errors import InputError
 
 #: How to measure a marker, in the README's words.
@@ -43,7 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="data directory (default: ./gsgeo-data); the scene goes to "
                         "DIR/scenes/demo, the ground truth to DIR/demo/checkpoints.csv")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    p.add_argument("--port", type=integer, default=8000, help="port (default 8000)")
     p.add_argument("--rebuild", action="store_true", help="rebuild the scene even if present")
     p.add_argument("--no-serve", action="store_true",
                    help="build the scene and the project, print where they are, and exit")

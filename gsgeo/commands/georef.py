@@ -17,9 +17,11 @@ from typing import Any
 
 import numpy as np
 
+from gsgeo.commands.argtypes import text as text_arg
 from gsgeo.commands.storearg import add_store_argument, store_url
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSONObject
+from gsgeo.limits import number_text
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -32,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("session", nargs="?", default=None,
                    help="session JSON whose points include the measured control (or use "
                         "--project)")
-    p.add_argument("--project", default=None, metavar="PID",
+    p.add_argument("--project", default=None, type=text_arg, metavar="PID",
                    help="a stored project (its points and control points) instead of a session")
     p.add_argument("--data", default="gsgeo-data", metavar="DIR",
                    help="data directory of --project (as for gsgeo serve; default gsgeo-data)")
@@ -81,8 +83,8 @@ def _distances(texts: list[str]) -> list[Any]:
             raise InputError(f"--distance {text!r}: expected A,B,METRES or A,B,METRES,SIGMA",
                              field=f"distance[{k}]")
         try:
-            nums = [float(v) for v in parts[2:]]
-        except ValueError:
+            nums = [number_text(v, None) for v in parts[2:]]
+        except InputError:
             raise InputError(f"--distance {text!r}: METRES and SIGMA must be numbers") from None
         out.append(Distance(parts[0], parts[1], nums[0], nums[1] if len(nums) > 1 else None))
     return out

@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+from gsgeo.commands.argtypes import text as text_arg
 from gsgeo.commands.storearg import add_store_argument, require_sqlite_store, store_url
 
 
@@ -25,7 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                     "residuals, accuracy against check points (ASPRS Positional Accuracy "
                     "Standards, Edition 2, 2023) and the measured points with their sigmas.",
     )
-    p.add_argument("project", help="project id (as listed by GET /api/projects)")
+    p.add_argument("project", type=text_arg, help="project id (as listed by GET /api/projects)")
     p.add_argument("-o", "--output", required=True, metavar="REPORT.pdf|REPORT.html",
                    help="output file; the format comes from the suffix (.pdf, .html, .htm)")
     p.add_argument("--data", default="gsgeo-data", metavar="DIR",

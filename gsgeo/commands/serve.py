@@ -8,6 +8,7 @@ import secrets
 import sys
 from pathlib import Path
 
+from gsgeo.commands.argtypes import integer
 from gsgeo.errors import InputError
 
 
@@ -26,16 +27,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default 127.0.0.1; any other address requires a "
                         "token: GSGEO_TOKEN or one generated and printed at start)")
-    p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    p.add_argument("--port", type=integer, default=8000, help="port (default 8000)")
     p.add_argument("--web", default=None, metavar="DIR",
                    help="web client directory (default: the repository's web/)")
-    p.add_argument("--workers", type=int, default=1,
+    p.add_argument("--workers", type=integer, default=1,
                    help="worker processes (default 1; more use more CPU cores, sharing the "
                         "SQLite store)")
-    p.add_argument("--solver-threads", type=int, default=1, metavar="N",
+    p.add_argument("--solver-threads", type=integer, default=1, metavar="N",
                    help="threads (per worker process) that run POST /api/intersect (default 1; "
                         "they keep their PROJ objects for the server's lifetime)")
-    p.add_argument("--store-threads", type=int, default=4, metavar="N",
+    p.add_argument("--store-threads", type=integer, default=4, metavar="N",
                    help="threads (per worker process) that store new points, POST "
                         "/api/projects/{pid}/points (default 4; kept warm for the server's "
                         "lifetime; 0: FastAPI's pool, which starts threads on demand)")

@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from gsgeo import limits
+from gsgeo.commands.argtypes import number
 from gsgeo.errors import GsgeoError, InputError
 from gsgeo.export.atomic import atomic_path, check_target
 from gsgeo.export.writer import FORMATS as EXPORT_FORMATS
@@ -50,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--source-crs", default=None,
                    help="geocentric CRS the scene is georeferenced in (default the session's, "
                         "EPSG:4978 WGS 84; e.g. EPSG:4936 ETRS89 for a pure conversion)")
-    p.add_argument("--sigma-px", type=float, default=None,
+    p.add_argument("--sigma-px", type=number, default=None,
                    help="a-priori aiming precision in pixels, "
                         f"{limits.SIGMA_PX_MIN:g} to {limits.SIGMA_PX_MAX:g} "
                         "(overrides the session's sigma_px)")

@@ -8,6 +8,7 @@ import json
 import os
 import sys
 
+from gsgeo.commands.argtypes import integer, number
 from gsgeo.errors import InputError
 
 
@@ -28,7 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("georeference (choose one)")
     g.add_argument("--origin", metavar="LAT,LON,H",
                    help="the input is a local ENU frame at this point (degrees, metres)")
-    g.add_argument("--heading", type=float, default=0.0, metavar="DEG",
+    g.add_argument("--heading", type=number, default=0.0, metavar="DEG",
                    help="with --origin: azimuth of the input +y axis, degrees clockwise from "
                         "true north (default 0)")
     g.add_argument("--crs", metavar="CRS",
@@ -49,14 +50,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="axis convention of the input, turned to Z-up before georeferencing: "
                         "z-up (ENU, default), y-up (glTF/three.js, SPZ's RUB), "
                         "y-down (COLMAP/OpenCV)")
-    p.add_argument("--max-splats", type=int, default=131_072,
+    p.add_argument("--max-splats", type=integer, default=131_072,
                    help="splats per tile at most (default 131072)")
-    p.add_argument("--spz-version", type=int, choices=[2, 3], default=3,
+    p.add_argument("--spz-version", type=integer, choices=[2, 3], default=3,
                    help="SPZ gzip file version (default 3)")
-    p.add_argument("--level", type=int, default=1, choices=range(10), metavar="0-9",
+    p.add_argument("--level", type=integer, default=1, choices=range(10), metavar="0-9",
                    help="gzip level of the SPZ payloads (default 1: fast; 9: ~10%% smaller, "
                         "many times slower)")
-    p.add_argument("--workers", type=int, default=None,
+    p.add_argument("--workers", type=integer, default=None,
                    help="worker processes (default: the number of CPUs; inputs under "
                         "200 000 splats use one)")
     p.add_argument("--overwrite", action="store_true",

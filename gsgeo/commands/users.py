@@ -12,6 +12,7 @@ import argparse
 import os
 from pathlib import Path
 
+from gsgeo.commands.argtypes import text as text_arg
 from gsgeo.errors import InputError
 from gsgeo.store.accountrecords import ROLES
 
@@ -27,11 +28,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     acts = p.add_subparsers(dest="action", metavar="ACTION")
     acts.required = True
     add = acts.add_parser("add", help="make a user and print their token (once)")
-    add.add_argument("name", help="user name (letters, digits, '.', '_', '-')")
+    add.add_argument("name", type=text_arg, help="user name (letters, digits, '.', '_', '-')")
     add.add_argument("--role", required=True, choices=ROLES, help="what the user may do")
     acts.add_parser("list", help="list the users (name, role, created)")
     rm = acts.add_parser("remove", help="delete a user (their token stops working)")
-    rm.add_argument("name", help="user name")
+    rm.add_argument("name", type=text_arg, help="user name")
     for a in (add, acts.choices["list"], rm):
         a.add_argument("--data", default="gsgeo-data", metavar="DIR",
                        help="data directory with the project store (default: ./gsgeo-data, "

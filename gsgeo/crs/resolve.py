@@ -18,6 +18,7 @@ from pyproj import CRS
 from pyproj.exceptions import CRSError as ProjCRSError
 
 from gsgeo.errors import CRSError
+from gsgeo.limits import text_problem
 
 _network = {"off": False}
 
@@ -53,6 +54,9 @@ def parse_crs(crs: object) -> CRS:
     if isinstance(crs, str):
         if not crs.strip():
             raise CRSError("a CRS must be given as text such as EPSG:27700")
+        problem = text_problem(crs)  # PROJ would read up to a NUL, or fail to encode
+        if problem is not None:
+            raise CRSError(f"a CRS text {problem}")
         return _parse_text(crs)
     if crs is None or isinstance(crs, bool | float):
         raise CRSError("a CRS must be given as text such as EPSG:27700")

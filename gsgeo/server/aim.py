@@ -16,15 +16,16 @@ from fastapi import APIRouter, Request
 from pydantic import BaseModel, ConfigDict, Field
 
 from gsgeo.errors import InputError
-from gsgeo.limits import SIGMA_PX_MAX, SIGMA_PX_MIN
+from gsgeo.limits import DIRECTION_MAX, MAX_ORIGIN_M, SIGMA_PX_MAX, SIGMA_PX_MIN
 from gsgeo.measure import Rays as RayArrays
 from gsgeo.server.api import ErrorBody
 from gsgeo.server.models import Mat16, Ray, rays_of
 from gsgeo.server.scenes import SceneFolders
+from gsgeo.server.textbody import TextCheckedRoute
 from gsgeo.service import ConflictError, NotFoundError
 from gsgeo.service.aiming import depth_on_ray, match_views, views_for_point
 
-router = APIRouter(prefix="/api", tags=["aiming"], responses={
+router = APIRouter(prefix="/api", route_class=TextCheckedRoute, tags=["aiming"], responses={
     404: {"model": ErrorBody, "description": "no such scene"},
     409: {"model": ErrorBody, "description": "the scene's tiles are on a static host, not here"},
     413: {"model": ErrorBody, "description": "request body over the size limit"},
@@ -32,8 +33,15 @@ router = APIRouter(prefix="/api", tags=["aiming"], responses={
 })
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
-Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
-Vec2 = Annotated[list[Finite], Field(min_length=2, max_length=2)]
+#: A direction's component: a length the layers can normalise (gsgeo.limits.DIRECTION_MAX).
+Component = Annotated[float, Field(ge=-DIRECTION_MAX, le=DIRECTION_MAX, allow_inf_nan=False)]
+Vec3 = Annotated[list[Component], Field(min_length=3, max_length=3)]
+#: A position in rendered ECEF, metres: within MAX_ORIGIN_M of the Earth's centre per axis.
+Coord = Annotated[float, Field(ge=-MAX_ORIGIN_M, le=MAX_ORIGIN_M, allow_inf_nan=False)]
+Position = Annotated[list[Coord], Field(min_length=3, max_length=3)]
+#: Window coordinates, CSS px: within ten times the largest canvas (100 000 px).
+Px = Annotated[float, Field(ge=-1e6, le=1e6, allow_inf_nan=False)]
+Vec2 = Annotated[list[Px], Field(min_length=2, max_length=2)]
 Metres = Annotated[float, Field(ge=0, le=1e7, allow_inf_nan=False)]
 Image = Annotated[str, Field(min_length=1, max_length=16_000_000,
                              description="base64 PNG or JPEG, a data: URL prefix allowed")]
@@ -87,7 +95,7 @@ class CameraModel(BaseModel):
     """The viewer's camera at capture (rendered ECEF; canvas size in CSS px)."""
 
     model_config = ConfigDict(extra="ignore")
-    position: Vec3
+    position: Position
     direction: Vec3 = Field(description="unit view direction")
     up: Vec3 = Field(description="unit up, orthogonal to direction")
     fovy: Annotated[float, Field(gt=0, lt=3.14159, allow_inf_nan=False)] = Field(
@@ -157,7 +165,7 @@ def scene_match(scene: SceneName, body: MatchRequest, request: Request) -> dict[
 class ViewsRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
     rays: Annotated[list[Ray], Field(min_length=1, max_length=1000)]
-    point_ecef: Vec3 = Field(description="provisional point, rendered ECEF, metres")
+    point_ecef: Position = Field(description="provisional point, rendered ECEF, metres")
     k: Annotated[int, Field(ge=1, le=12)] = 4
     fovy: Annotated[float, Field(gt=0.01, lt=3.1, allow_inf_nan=False)] = Field(
         description="vertical field of view of the views, radians")

@@ -27,6 +27,7 @@ from gsgeo.server import models as m
 from gsgeo.server.etags import IfMatch, if_match_versions, with_etag
 from gsgeo.server.hosts import is_loopback
 from gsgeo.server.scenes import list_scenes
+from gsgeo.server.textbody import TextCheckedRoute
 from gsgeo.service import CheckPointRecord, FeatureRecord, PointRecord, Project, Projects
 from gsgeo.service.audit import audit_page
 from gsgeo.service.checkpoints import CheckPointRow
@@ -43,7 +44,7 @@ class ErrorBody(m.BaseModel):
     field: str | None = None
 
 
-router = APIRouter(prefix="/api", responses={
+router = APIRouter(prefix="/api", route_class=TextCheckedRoute, responses={
     400: {"model": ErrorBody, "description": "Host header not served, or bad Content-Length"},
     401: {"model": ErrorBody, "description": "token missing or wrong (server bound off loopback)"},
     403: {"model": ErrorBody, "description": "cross-origin request, or a change asked for "

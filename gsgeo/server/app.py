@@ -154,6 +154,8 @@ def _install_error_handlers(app: FastAPI) -> None:
     async def http_error(req: Request, exc: StarletteHTTPException) -> Response:
         if isinstance(exc.__cause__, BodyTooLarge):
             return _error(413, str(exc.__cause__), "body")
+        if isinstance(exc.__cause__, GsgeoError):  # a body's text refused where it is parsed
+            return _error(422, str(exc.__cause__), exc.__cause__.field)
         msg = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
         status, field = exc.status_code, None
         if status == 400 and "parsing the body" in msg:  # Starlette's words for a bad body

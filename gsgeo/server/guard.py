@@ -12,7 +12,9 @@
 - Accounts (gsgeo.service.accounts): a user's own token counts as the token does; the request
   is then made as that user (the audit trail's "who", set with gsgeo.service.audit.acting_as),
   the server's token as "admin-token", no token on loopback (when none is configured) as
-  "local". Off loopback a token is required even when none is configured. A ``viewer`` may
+  "local". Off loopback a token is required even when none is configured. A request that
+  presents a token (header, or the /scenes cookie) is judged by it everywhere: on loopback too
+  a wrong or revoked one gets 401, never the local operator's rights. A ``viewer`` may
   only read: any other method than GET/HEAD/OPTIONS on /api or /ogc (POST /api/intersect,
   which stores nothing, aside) gets 403 naming the role. Only an ``admin`` may delete a whole
   project (``DELETE /api/projects/{pid}``: it takes every point, line, building, check point
@@ -130,7 +132,12 @@ class Guard:
         return self.loopback
 
     async def _identify(self, scope: Scope, tokens: list[str]) -> tuple[str, str] | None:
-        """(user name, role) of the request, or None when it must be refused (401)."""
+        """(user name, role) of the request, or None when it must be refused (401).
+
+        A request that presents a token is judged by it, on loopback too: a wrong or revoked
+        token is refused, never taken for the local operator. Empty values present nothing.
+        """
+        tokens = [t for t in tokens if t]
         if self._token_ok(tokens):
             return ADMIN_TOKEN_ACTOR, "admin"
         projects = getattr(getattr(scope.get("app"), "state", None), "projects", None)
@@ -140,7 +147,7 @@ class Guard:
                 user = await anyio.to_thread.run_sync(authenticate, store, t)
                 if user is not None:
                     return user.name, user.role
-        if self._open_on_loopback(scope):
+        if not tokens and self._open_on_loopback(scope):
             return LOCAL, "admin"
         return None
 
@@ -170,9 +177,12 @@ class Guard:
         is_scene = path == "/scenes" or path.startswith("/scenes/")
         who = (LOCAL, "admin")
         if is_api or is_scene:
-            found = await self._identify(scope, presented_tokens(headers, with_cookie=is_scene))
+            tokens = presented_tokens(headers, with_cookie=is_scene)
+            found = await self._identify(scope, tokens)
             if found is None:
-                await _send_json(send, 401, "a valid token is required: send "
+                why = "the token presented is not valid (wrong, or its user was removed); " \
+                    if any(tokens) else ""
+                await _send_json(send, 401, why + "a valid token is required: send "
                                  "'Authorization: Bearer TOKEN' (the server's token, see its "
                                  "start message or GSGEO_TOKEN, or a user's, made with "
                                  "'gsgeo users add'); the viewer takes it from "

@@ -13,8 +13,9 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query, Request, Response
 
 from gsgeo.server.api import PID, ErrorBody, svc
+from gsgeo.server.textbody import TextCheckedRoute
 
-router = APIRouter(prefix="/api", responses={
+router = APIRouter(prefix="/api", route_class=TextCheckedRoute, responses={
     404: {"model": ErrorBody, "description": "no such project"},
     422: {"model": ErrorBody, "description": "malformed request; message names the field"},
     503: {"model": ErrorBody, "description": "the project store is busy or unavailable"},

@@ -21,6 +21,7 @@ from gsgeo.aim.splatindex import SplatIndex, scene_index
 from gsgeo.aim.views import suggest_views
 from gsgeo.crs.modelmatrix import invert_affine, matrix4
 from gsgeo.errors import GsgeoError, InputError
+from gsgeo.limits import origin_problem
 from gsgeo.measure import Rays
 from gsgeo.store import ConflictError, NotFoundError
 
@@ -124,6 +125,9 @@ def views_for_point(scene_dir: Path, rays: Rays, point: Any, k: int, fovy: float
     POST /api/scenes/{scene}/views. The point is taken to be rendered under the first ray's
     modelMatrix. ``shape_views``: views for the scene's matcher (gsgeo.aim.views)."""
     p = np.asarray(point, dtype=np.float64).reshape(3)
+    problem = origin_problem(p)  # a point as far as a camera may be, no farther
+    if problem is not None:
+        raise InputError(problem, field="point_ecef")
     if np.linalg.norm(p - rays.origins[0]) < 1e-3:
         raise InputError("the point lies at the first ray's origin", field="point_ecef")
     index = scene_splats(scene_dir)

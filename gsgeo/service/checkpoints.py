@@ -26,6 +26,7 @@ import orjson
 
 from gsgeo.errors import InputError
 from gsgeo.jsontypes import JSON, JSONObject
+from gsgeo.limits import number_text
 from gsgeo.service.validate import item_id
 
 ID_COLUMNS = ("point_id", "id", "name", "label")
@@ -91,6 +92,11 @@ def _num(value: JSON, field: str, optional: bool = False) -> float | None:
         raise InputError("missing", field=field)
     if isinstance(value, bool) or not isinstance(value, (str, int, float)):
         raise InputError(f"expected a number, got {type(value).__name__}", field=field)
+    if isinstance(value, str):  # ASCII decimals only; "nan" is an optional value left out
+        text = value.strip()
+        if optional and text.lower() == "nan":
+            return None
+        return number_text(text, field)
     try:
         v = float(value)
     except (TypeError, ValueError):

@@ -50,16 +50,21 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
         settings = validate_settings(settings, svc.data_dir)
         measurements: list[Measurement | JSONObject] = []
         by_id: dict[str, JSONObject | None] = {}
+        first_failure: GsgeoError | None = None
         for pt in points:
             try:
                 m = measure(stored_rays(pt.rays), settings, pt.excluded, svc.data_dir,
                             point_id=pt.id, code=pt.code, description=pt.description)
-            except GsgeoError:
+            except GsgeoError as exc:
                 by_id[pt.id] = None
+                first_failure = first_failure or exc.within(f"point {pt.id}")
                 continue
             measurements.append(m)
             by_id[pt.id] = m.record()
         grid_crs = settings["crs"]
+        if not measurements and first_failure is not None:  # the cause, e.g. a missing geoid
+            raise first_failure.part_of("crs", f"no point of project '{pid}' can be measured "
+                                               f"in {grid_crs}")
     else:
         if project.crs is None:
             raise InputError(f"project '{pid}' has no grid CRS; give ?crs=EPSG:... to export",
@@ -68,7 +73,10 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
         by_id = {pt.id: pt.record for pt in points}
         grid_crs = project.crs
     if not measurements:
-        raise InputError(f"project '{pid}' has no solved points to export")
+        failed = [pt for pt in points if pt.error]
+        why = (f": its {len(failed)} point(s) could not be measured in {grid_crs}, e.g. "
+               f"{failed[0].id}: {failed[0].error}" if failed else "")
+        raise InputError(f"project '{pid}' has no solved points to export{why}")
     models: list[BuildingModel] = []
     skipped: list[str] = []
     if fmt in BUILDING_FORMATS:

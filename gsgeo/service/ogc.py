@@ -43,6 +43,7 @@ from gsgeo.export.tables import (
 )
 from gsgeo.georef.control import grid_to_ecef
 from gsgeo.jsontypes import JSONObject
+from gsgeo.limits import number_text
 from gsgeo.pointschema import EXPORT_KEYS, provenance
 from gsgeo.service.buildings import spec_point_ids
 from gsgeo.service.measuring import solve_settings
@@ -124,7 +125,10 @@ def storage_crs(project: Project) -> str:
 def pick_crs(project: Project, uri: str | None, what: str = "crs") -> OutputCRS:
     """The offered CRS named by ``uri`` (None: CRS84); CRSError naming the offered ones."""
     offered = offered_crs(project)
-    if uri is None or uri.strip() in ("", CRS84, CRS84H):
+    if uri is not None and not uri.strip():
+        raise CRSError(f"is empty: leave it out for CRS84, or use one of "
+                       f"{', '.join(c.uri for c in offered)}", field=what)
+    if uri is None or uri.strip() in (CRS84, CRS84H):
         return OutputCRS(CRS84H if uri is not None and uri.strip() == CRS84H else CRS84, False)
     text = uri.strip().removeprefix("[").removesuffix("]")
     if text.upper().startswith("EPSG:"):
@@ -171,11 +175,10 @@ def parse_bbox(text: str) -> tuple[float, float, float, float]:
     if len(parts) not in (4, 6):
         raise InputError(f"expected 4 or 6 comma-separated numbers, got {len(parts)}", field="bbox")
     try:
-        v = [float(p) for p in parts]
-    except ValueError:
-        raise InputError(f"{text[:80]!r} is not a list of numbers", field="bbox") from None
-    if not all(math.isfinite(x) for x in v):
-        raise InputError("numbers must be finite", field="bbox")
+        v = [number_text(p, "bbox") for p in parts]
+    except InputError as exc:
+        raise InputError(f"{text[:80]!r} is not a list of numbers: {exc.problem}",
+                         field="bbox") from None
     x0, y0, x1, y1 = (v[0], v[1], v[2], v[3]) if len(v) == 4 else (v[0], v[1], v[3], v[4])
     if y0 > y1:
         raise InputError(f"the lower corner's second coordinate ({y0}) is above the upper "
@@ -286,6 +289,10 @@ class FeatureService:
                 x0, y0, x1, y1 = y0, x0, y1, x1
             if not bcrs.grid and (y0 < -90 or y1 > 90):
                 raise InputError("latitudes must be within -90 and 90", field="bbox")
+            if not bcrs.grid and not (-180 <= x0 <= 180 and -180 <= x1 <= 180):
+                raise InputError("longitudes must be within -180 and 180 (a box across the "
+                                 "antimeridian has its west edge east of its east edge)",
+                                 field="bbox")
             if bcrs.grid and x0 > x1:
                 raise InputError("the lower corner's easting is beyond the upper one's",
                                  field="bbox")

@@ -38,6 +38,7 @@ import numpy as np
 
 from gsgeo.crs.ellipsoid import enu_rotation, geodetic_to_ecef_closed_form
 from gsgeo.errors import CRSError, InputError
+from gsgeo.limits import number_text
 from gsgeo.tiles.placement import AXES, Placement, RigidPlacement, rot_z
 
 #: Where a scene without georeference is put: latitude, longitude (degrees), ellipsoidal height (m).
@@ -47,9 +48,10 @@ def _three(value: str | Sequence[float], what: str) -> tuple[float, float, float
     """Three finite numbers from "a,b,c" text or a sequence; InputError naming `what`."""
     if isinstance(value, str):
         try:
-            vals = tuple(float(v) for v in value.split(","))
-        except ValueError:
-            raise InputError(f"{what} expects 3 comma-separated numbers, got {value!r}") from None
+            vals = tuple(number_text(v.strip(), what) for v in value.split(","))
+        except InputError:
+            raise InputError(f"{what} expects 3 comma-separated numbers (ASCII decimals), "
+                             f"got {value!r}") from None
     else:
         try:
             vals = tuple(float(v) for v in value)

@@ -3,8 +3,10 @@
 Parameters are read from the query string here (not by pydantic), so that every bad one is
 answered 400 with OGC's exception body ``{"code", "description"}``; an unknown collection or
 feature is 404 in the same shape. JSON (GeoJSON for features) by default, HTML with ``f=html``
-or a browser's ``Accept: text/html``. Feature answers carry ``Content-Crs``, ``ETag`` (a hash of
-the body) and ``Last-Modified``; ``If-None-Match`` with the current ETag gets 304.
+or a browser's ``Accept: text/html``; HEAD answers as GET without the body. Feature answers
+carry ``Content-Crs``, ``ETag`` (a hash of the body) and ``Last-Modified``; ``If-None-Match``
+with the current ETag gets 304. Numbers are ASCII decimal only (gsgeo.limits.integer_text,
+number_text): no Unicode digits, underscores, blanks, nan or inf.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from fastapi.responses import HTMLResponse, Response
 from gsgeo import __version__
 from gsgeo.errors import CRSError, InputError
 from gsgeo.jsontypes import JSONObject
+from gsgeo.limits import integer_text
 from gsgeo.server.ogc import html
 from gsgeo.server.ogc.openapi import OPENAPI_MEDIA, openapi_document
 from gsgeo.server.ogc.pages import PageCache
@@ -145,7 +148,7 @@ def _self_links(url: str, as_html: bool, media: str = JSON) -> list[JSONObject]:
                   + ("JSON" if as_html else "HTML"))]
 
 
-@router.get("")
+@router.api_route("", methods=["GET", "HEAD"])
 def landing(request: Request) -> Response:
     def make() -> Response:
         as_html = _wants_html(request, _params(request, {"f"}))
@@ -166,7 +169,7 @@ def landing(request: Request) -> Response:
     return _answer(make)
 
 
-@router.get("/api")
+@router.api_route("/api", methods=["GET", "HEAD"])
 def api_definition(request: Request) -> Response:
     def make() -> Response:
         _params(request, {"f"})
@@ -175,7 +178,7 @@ def api_definition(request: Request) -> Response:
     return _answer(make)
 
 
-@router.get("/conformance")
+@router.api_route("/conformance", methods=["GET", "HEAD"])
 def conformance(request: Request) -> Response:
     def make() -> Response:
         as_html = _wants_html(request, _params(request, {"f"}))
@@ -202,7 +205,7 @@ def _collection_doc(root: str, c: Collection, as_html: bool = False) -> JSONObje
     }
 
 
-@router.get("/collections")
+@router.api_route("/collections", methods=["GET", "HEAD"])
 def collections(request: Request) -> Response:
     def make() -> Response:
         as_html = _wants_html(request, _params(request, {"f"}))
@@ -217,7 +220,7 @@ def collections(request: Request) -> Response:
     return _answer(make)
 
 
-@router.get("/collections/{collection_id}")
+@router.api_route("/collections/{collection_id}", methods=["GET", "HEAD"])
 def collection(request: Request, collection_id: str) -> Response:
     def make() -> Response:
         as_html = _wants_html(request, _params(request, {"f"}))
@@ -228,7 +231,7 @@ def collection(request: Request, collection_id: str) -> Response:
     return _answer(make)
 
 
-@router.get("/collections/{collection_id}/queryables")
+@router.api_route("/collections/{collection_id}/queryables", methods=["GET", "HEAD"])
 def queryables(request: Request, collection_id: str) -> Response:
     def make() -> Response:
         as_html = _wants_html(request, _params(request, {"f"}))
@@ -257,10 +260,10 @@ def _int(params: dict[str, str], name: str, default: int, low: int, high: int | 
     if text is None:
         return default
     try:
-        v = int(text)
-    except ValueError:
-        raise OgcError(400, "InvalidParameterValue", f"{name} must be an integer, "
-                       f"not {text[:40]!r}") from None
+        v = integer_text(text, name)
+    except InputError:
+        raise OgcError(400, "InvalidParameterValue", f"{name} must be a whole number written "
+                       f"with ASCII digits, not {text[:40]!r}") from None
     if v < low:
         raise OgcError(400, "InvalidParameterValue", f"{name} must be at least {low}")
     if high is not None and v > high:
@@ -375,7 +378,7 @@ def _render_items(svc: FeatureService, root: str, collection_id: str, params: di
     return _rendered(orjson.dumps(doc), GEOJSON, page, after)
 
 
-@router.get("/collections/{collection_id}/items")
+@router.api_route("/collections/{collection_id}/items", methods=["GET", "HEAD"])
 def items(request: Request, collection_id: str) -> Response:
     def make() -> Response:
         params = _params(request, ITEM_PARAMS)
@@ -397,7 +400,7 @@ def items(request: Request, collection_id: str) -> Response:
     return _answer(make)
 
 
-@router.get("/collections/{collection_id}/items/{feature_id:path}")
+@router.api_route("/collections/{collection_id}/items/{feature_id:path}", methods=["GET", "HEAD"])
 def item(request: Request, collection_id: str, feature_id: str) -> Response:
     def make() -> Response:
         params = _params(request, {"f", "crs"})
