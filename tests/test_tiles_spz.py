@@ -146,7 +146,7 @@ def test_real_tile_header_and_plausible_values(white_sculpture):
     (gzip.compress(struct.pack("<IIIBBBB", 0x12345678, 3, 0, 0, 12, 0, 0)), "magic"),
     (gzip.compress(struct.pack("<IIIBBBB", 0x5053474E, 4, 0, 0, 12, 0, 0)), "version 4"),
     (gzip.compress(struct.pack("<IIIBBBB", 0x5053474E, 3, 10, 0, 12, 0, 0)), "truncated"),
-])
+], ids=["not gzip", "short header", "magic", "version 4", "truncated"])  # gzip's bytes hold the time
 def test_bad_payloads_are_named(blob, msg):
     with pytest.raises(InputError, match=msg):
         spz.decode(blob)
