@@ -42,11 +42,19 @@ def white_sculpture_rebuilt(tmp_path_factory):
     return work / "ours", rebuild_ply_and_tiles(WHITE_SCULPTURE, work, work / "ours")
 
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Groups for pytest-xdist's ``--dist loadgroup`` (pyproject.toml's addopts): the browser
-    tests all on one worker (they share one Chromium, one demo and one box scene, and two
-    SwiftShader renderers at once would only slow each other), every other module whole on
-    one worker (its module fixtures, servers and demo builds among them, made once)."""
-    for item in items:
-        browser = item.get_closest_marker("e2e") is not None and "e2e" in item.path.parts
-        item.add_marker(pytest.mark.xdist_group("browser" if browser else item.path.stem))
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
+    """pytest-xdist's scheduler for the suite (pyproject.toml's addopts: two workers): every
+    test module whole on one worker (its module fixtures, servers and demo builds among them,
+    made once), and the browser tests (tests/e2e/) all together on one worker: they share one
+    Chromium, one demo and one box scene (tests/e2e/shared.py), and two SwiftShader renderers
+    at once would only slow each other. They are collected first, so they start first.
+    (xdist's own ``--dist loadgroup`` marks do not reach it under pytest 9.2: the group is
+    written into a node id that pytest no longer reads.)"""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModulesWithTheBrowserTestsTogether(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return "tests/e2e/" if module.startswith("tests/e2e/") else module
+
+    return ModulesWithTheBrowserTestsTogether(config, log)
