@@ -37,7 +37,10 @@ _LOCK = threading.Lock()
 RC: dict[RcKeyType, Any] = {
     "font.size": 8.0,
     "axes.formatter.useoffset": False, "axes.formatter.limits": (-9, 12),
-    "axes.titlesize": 9.0, "axes.labelsize": 8.0, "legend.fontsize": 7.0}
+    "axes.titlesize": 9.0, "axes.labelsize": 8.0, "legend.fontsize": 7.0,
+    # Text is drawn as given: a point id "$a_$" is an id, not mathtext (which would fail to
+    # parse it, or typeset it as a formula). No figure text here is meant as mathtext.
+    "text.parse_math": False, "text.usetex": False}
 #: Colours: used control, flagged outlier, excluded, check point, measured point.
 COLOURS = {"control": "#1f5fa8", "outlier": "#c0182b", "excluded": "#8a8a8a",
            "check": "#1a8a3a", "point": "#444444"}

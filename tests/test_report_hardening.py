@@ -1,0 +1,158 @@
+"""The survey report against hostile project text and resources: ids that matplotlib would
+read as mathtext, documents that reference files or URLs (WeasyPrint must fetch nothing),
+and the PDF's cost (one report per project at a time, its answer reused)."""
+
+from __future__ import annotations
+
+import base64
+import http.server
+import io
+import threading
+import warnings
+
+import cv2
+import numpy as np
+import pypdf
+import pytest
+from servertools import ecef_of, rays_at
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    from fastapi.testclient import TestClient
+
+from gsgeo.cli import main
+from gsgeo.report import render
+from gsgeo.report.pdf import html_to_pdf
+from gsgeo.server.app import ServerConfig, create_app
+from gsgeo.service import open_projects
+from gsgeo.service.checkpoints import CheckPointRow
+from gsgeo.service.reporting import report_data
+
+CRS = "EPSG:32630"
+#: Ids matplotlib's mathtext refuses (or would typeset) when it parses them.
+MATH_IDS = ["$a_$", "$^{$", "x$^$y", "$$", "50$ & 60$"]
+
+
+@pytest.fixture
+def math_dir(tmp_path):
+    """A project whose points, check points and code carry dollar signs."""
+    svc = open_projects(tmp_path)
+    try:
+        p = svc.create_project(name="Cost $x_$ site", id="money", crs=CRS,
+                               description="$\\alpha$ and $b_$")
+        for k, pid in enumerate(MATH_IDS):
+            svc.add_point(p.id, {"id": pid, "code": "$c_$",
+                                 "rays": rays_at(ecef_of(-0.1276 + 1e-4 * k, 51.5072, 50.0), 3,
+                                                 ifov=0.0005)})
+        recs = {q.id: q.record for q in svc.list_points(p.id)}
+        svc.add_check_points(p.id, [CheckPointRow(i, recs[i]["easting"] + 0.01,
+                                                  recs[i]["northing"] - 0.01,
+                                                  recs[i]["height"] + 0.02)
+                                    for i in MATH_IDS], CRS)
+    finally:
+        svc.store.close()
+    return tmp_path
+
+
+def test_ids_with_dollar_signs_are_drawn_as_text_in_html_pdf_api_and_cli(math_dir, tmp_path):
+    svc = open_projects(math_dir)
+    try:
+        data = report_data(svc, "money")
+    finally:
+        svc.store.close()
+    html = render(data, "html").decode()
+    # the plans (points, check residuals) and the dH bars are there: no figure was dropped
+    assert html.count("data:image/png;base64,") == 3
+    for pid in MATH_IDS:
+        assert f"<td>{pid.replace('&', '&amp;')}</td>" in html, pid
+    pdf = render(data, "pdf")
+    text = " ".join(p.extract_text() for p in pypdf.PdfReader(io.BytesIO(pdf)).pages)
+    assert "$a_$" in text and "$^{$" in text
+    with TestClient(create_app(ServerConfig(data_dir=math_dir,
+                                            allowed_hosts={"testserver"}))) as client:
+        for fmt in ("html", "pdf"):
+            r = client.get(f"/api/projects/money/report?format={fmt}")
+            assert r.status_code == 200, (fmt, r.text[:300])
+    out = tmp_path / "r.html"
+    assert main(["report", "money", "--data", str(math_dir), "-o", str(out)]) == 0
+    assert "$a_$" in out.read_text()
+
+
+def test_plot_labels_keep_the_ids_literally(monkeypatch):
+    """The labels on the plans are the ids themselves, not typeset formulas."""
+    from matplotlib.figure import Figure
+
+    from gsgeo.report import plots
+
+    seen: list[str] = []
+    real = Figure.savefig
+
+    def capture(fig, *args, **kwargs):
+        seen.extend(t.get_text() for t in fig.findobj(lambda a: hasattr(a, "get_text")))
+        return real(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", capture)
+    assert plots.points_plan(MATH_IDS, [0, 1, 2, 3, 4], [0, 1, 0, 1, 0],
+                             [0.01] * 5, [0.01] * 5, "t") is not None
+    assert plots.height_residuals(MATH_IDS, [0.01, -0.01, 0.0, 0.02, 0.01],
+                                  ["check"] * 5, "t") is not None
+    for pid in MATH_IDS:
+        assert pid in seen
+
+
+# WeasyPrint fetches nothing --------------------------------------------------------------------
+class _Recorder(http.server.BaseHTTPRequestHandler):
+    hits: list[str] = []
+
+    def do_GET(self) -> None:  # noqa: N802 (the stdlib's name)
+        type(self).hits.append(self.path)
+        body = PNG
+        self.send_response(200)
+        self.send_header("Content-Type", "image/png")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *args: object) -> None:
+        pass
+
+
+PNG = cv2.imencode(".png", np.full((8, 8), 128, np.uint8))[1].tobytes()
+
+
+@pytest.fixture
+def recorder():
+    _Recorder.hits = []
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _Recorder)
+    t = threading.Thread(target=server.serve_forever, daemon=True)
+    t.start()
+    yield server.server_address[1]
+    server.shutdown()
+    server.server_close()
+
+
+def pdf_images(pdf: bytes) -> int:
+    return sum(len(p.images) for p in pypdf.PdfReader(io.BytesIO(pdf)).pages)
+
+
+def test_weasyprint_fetches_no_url_and_no_file(recorder, tmp_path):
+    local = tmp_path / "local.png"
+    local.write_bytes(PNG)
+    url = f"http://127.0.0.1:{recorder}"
+    html = f"""<!doctype html><html><head>
+<link rel="stylesheet" href="{url}/style.css">
+<style>@import url("{url}/import.css"); body {{ background: url("{url}/bg.png"); }}
+@font-face {{ font-family: x; src: url("{url}/font.woff"); }}</style></head>
+<body style="font-family: x">
+<img src="{url}/img.png"><img src="file://{local}"><img src="file:///etc/passwd">
+<object data="{url}/object"></object><p>text</p></body></html>"""
+    pdf = html_to_pdf(html)
+    assert pdf.startswith(b"%PDF-")
+    assert _Recorder.hits == []
+    assert pdf_images(pdf) == 0  # neither the loopback image nor the local file came in
+
+
+def test_weasyprint_still_embeds_data_uris():
+    uri = "data:image/png;base64," + base64.b64encode(PNG).decode()
+    pdf = html_to_pdf(f'<!doctype html><html><body><img src="{uri}"></body></html>')
+    assert pdf_images(pdf) == 1
