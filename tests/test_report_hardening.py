@@ -7,6 +7,7 @@ from __future__ import annotations
 import base64
 import http.server
 import io
+import re
 import threading
 import warnings
 
@@ -156,3 +157,75 @@ def test_weasyprint_still_embeds_data_uris():
     uri = "data:image/png;base64," + base64.b64encode(PNG).decode()
     pdf = html_to_pdf(f'<!doctype html><html><body><img src="{uri}"></body></html>')
     assert pdf_images(pdf) == 1
+
+
+# a long report: cheap markup, every point listed; one report per project version ------------
+def many_points(data: dict, n: int) -> dict:
+    """``data`` with ``n`` measured points spread over 1 km (ids P1..Pn)."""
+    row = dict(data["points"][0])
+    rng = np.random.default_rng(5)
+    pts = []
+    for i in range(n):
+        pts.append(row | {"point_id": f"P{i + 1}", "easting": row["easting"] + rng.uniform(0, 1000),
+                          "northing": row["northing"] + rng.uniform(0, 1000)})
+    return data | {"points": pts}
+
+
+def test_a_long_points_table_is_a_listing_with_every_point(math_dir):
+    svc = open_projects(math_dir)
+    try:
+        data = many_points(report_data(svc, "money"), 450)
+    finally:
+        svc.store.close()
+    html = render(data, "html").decode()
+    # the long table is not laid out as 450 x 14 cells (WeasyPrint's cost), the short ones are
+    assert html.count("<td") < 300
+    assert "Check points: measured minus check." in html
+    listed = re.findall(r"^(P\d+) ", html, flags=re.M)
+    assert listed == [f"P{i + 1}" for i in range(450)]
+    from gsgeo.report.content import fmt_m
+    for r in data["points"][::37]:  # the numbers as the table would give them
+        line = re.search(rf"^{r['point_id']} .*$", html, flags=re.M).group()
+        assert fmt_m(r["easting"]) in line and fmt_m(r["northing"]) in line
+    pdf = render(data, "pdf")
+    text = " ".join(p.extract_text() for p in pypdf.PdfReader(io.BytesIO(pdf)).pages)
+    assert set(re.findall(r"\bP\d+\b", text)) >= {f"P{i + 1}" for i in range(450)}
+
+
+def test_one_report_per_project_version_reused_with_an_etag(math_dir, monkeypatch):
+    """Two requests at once make one report; a later one (nothing changed) reuses it and
+    If-None-Match gets 304; a change to the project makes a new one."""
+    import gsgeo.report
+
+    made: list[str] = []
+    started, release = threading.Event(), threading.Event()
+
+    def slow_render(data, fmt):
+        made.append(fmt)
+        started.set()
+        assert release.wait(10)
+        return f"report {len(made)}".encode()
+
+    monkeypatch.setattr(gsgeo.report, "render", slow_render)
+    with TestClient(create_app(ServerConfig(data_dir=math_dir,
+                                            allowed_hosts={"testserver"}))) as client:
+        url = "/api/projects/money/report?format=html"
+        got: list = []
+        threads = [threading.Thread(target=lambda: got.append(client.get(url)))
+                   for _ in range(2)]
+        threads[0].start()
+        assert started.wait(10)
+        threads[1].start()
+        release.set()
+        for t in threads:
+            t.join(10)
+        assert [r.status_code for r in got] == [200, 200] and made == ["html"]
+        assert got[0].content == got[1].content == b"report 1"
+        tag = got[0].headers["etag"]
+        again = client.get(url)
+        assert again.content == b"report 1" and again.headers["etag"] == tag and made == ["html"]
+        assert client.get(url, headers={"If-None-Match": tag}).status_code == 304
+        assert client.patch("/api/projects/money", json={"description": "x"}).status_code == 200
+        changed = client.get(url, headers={"If-None-Match": tag})
+        assert changed.status_code == 200 and changed.content == b"report 2"
+        assert changed.headers["etag"] != tag
