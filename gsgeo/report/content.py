@@ -1,8 +1,9 @@
 """The survey report's content: report data (gsgeo.service.reporting's JSON) -> sections.
 
 A :class:`Report` is a title, a summary and sections of blocks (facts, tables, figures,
-notes), every value already formatted as text. HTML and PDF are both rendered from it, so
-they cannot differ. Coordinates are shown in the grid CRS's units with 3 decimals;
+notes; a table of more than LISTING_ROWS rows as a fixed-width listing), every value already
+formatted as text. HTML and PDF are both rendered from it, so they cannot differ.
+Coordinates are shown in the grid CRS's units with 3 decimals;
 sigmas, residuals and accuracy figures in millimetres with 1 decimal (``fmt_mm``).
 """
 
@@ -92,7 +93,26 @@ class Notes:
     kind: str = "notes"
 
 
-Block = Facts | Table | Figure | Notes
+@dataclass
+class Listing:
+    """A long table set as fixed-width text (see :func:`listing`): its ``header`` lines and
+    its rows in ``blocks`` of at most LISTING_BLOCK_ROWS lines, each printed under the header
+    again and kept on one page."""
+
+    header: str
+    blocks: list[str]
+    caption: str = ""
+    kind: str = "listing"
+
+
+Block = Facts | Table | Figure | Notes | Listing
+
+#: A table of more rows than this is set as a Listing. WeasyPrint lays out and paints every
+#: cell of a table as its own box (5 000 points x 14 columns: about 50 s and gigabytes); a
+#: listing line is one box, about 15 times cheaper, and holds the same text.
+LISTING_ROWS = 200
+#: Rows per block of a listing: with its header, one block fills most of an A4 page.
+LISTING_BLOCK_ROWS = 80
 
 
 @dataclass
@@ -117,6 +137,49 @@ def _table(columns: Sequence[tuple[str, bool]], rows: list[list[str]],
            row_classes: list[str] | None = None, caption: str = "") -> Table:
     return Table([c for c, _ in columns], rows, [n for _, n in columns],
                  row_classes or [""] * len(rows), caption)
+
+
+def _header_lines(title: str, width: int) -> list[str]:
+    """A column title's words packed into lines of at most ``width`` characters (a longer
+    word stands alone)."""
+    lines: list[str] = []
+    for word in title.split():
+        if lines and len(lines[-1]) + 1 + len(word) <= width:
+            lines[-1] += " " + word
+        else:
+            lines.append(word)
+    return lines or [""]
+
+
+def listing(table: Table) -> Listing:
+    """``table`` as fixed-width text: each column as wide as its widest value or title word,
+    numeric columns right-aligned, columns two spaces apart, titles wrapped at spaces and
+    set at the foot of the header; no value is ever cut (a longer one shifts the rest of its
+    line). Every row is kept, in order; the rows' marks (``row_classes``) are not drawn."""
+    widths = [max([len(max(c.split() or [""], key=len))] + [len(r[j]) for r in table.rows])
+              for j, c in enumerate(table.columns)]
+    titles = [_header_lines(c, w) for c, w in zip(table.columns, widths, strict=True)]
+    depth = max(len(t) for t in titles)
+    titles = [[""] * (depth - len(t)) + t for t in titles]
+
+    def line(cells: Sequence[str]) -> str:
+        return "  ".join(c.rjust(w) if num else c.ljust(w) for c, w, num
+                         in zip(cells, widths, table.numeric, strict=True)).rstrip()
+
+    header = [line([t[k] for t in titles]) for k in range(depth)]
+    header.append("-" * max(len(h) for h in header))
+    rows = [line(r) for r in table.rows]
+    blocks = ["\n".join(rows[i:i + LISTING_BLOCK_ROWS])
+              for i in range(0, len(rows), LISTING_BLOCK_ROWS)]
+    return Listing("\n".join(header), blocks, table.caption)
+
+
+def _set_long_tables(sections: list[Section]) -> list[Section]:
+    """Every table of more than LISTING_ROWS rows as a Listing."""
+    for s in sections:
+        s.blocks = [listing(b) if isinstance(b, Table) and len(b.rows) > LISTING_ROWS else b
+                    for b in s.blocks]
+    return sections
 
 
 # sections -----------------------------------------------------------------------------------
@@ -547,6 +610,7 @@ def build_report(data: JSONObject) -> Report:
         subtitle="Point measurement in a 3D Gaussian Splatting scene by multi-ray intersection",
         generated=f"{gen.get('at', '')} by {gen.get('by', 'gsgeo')}",
         summary=_summary(data),
-        sections=[_project_section(data), _frames_section(data), _georef_section(data),
-                  _accuracy_section(data), _points_section(data), _audit_section(data)],
+        sections=_set_long_tables([
+            _project_section(data), _frames_section(data), _georef_section(data),
+            _accuracy_section(data), _points_section(data), _audit_section(data)]),
     )

@@ -37,7 +37,10 @@ _LOCK = threading.Lock()
 RC: dict[RcKeyType, Any] = {
     "font.size": 8.0,
     "axes.formatter.useoffset": False, "axes.formatter.limits": (-9, 12),
-    "axes.titlesize": 9.0, "axes.labelsize": 8.0, "legend.fontsize": 7.0}
+    "axes.titlesize": 9.0, "axes.labelsize": 8.0, "legend.fontsize": 7.0,
+    # Text is drawn as given: a point id "$a_$" is an id, not mathtext (which would fail to
+    # parse it, or typeset it as a formula). No figure text here is meant as mathtext.
+    "text.parse_math": False, "text.usetex": False}
 #: Colours: used control, flagged outlier, excluded, check point, measured point.
 COLOURS = {"control": "#1f5fa8", "outlier": "#c0182b", "excluded": "#8a8a8a",
            "check": "#1a8a3a", "point": "#444444"}
@@ -144,8 +147,12 @@ def height_residuals(ids: Sequence[str], dh: Sequence[float], styles: Sequence[s
         fig = _figure(6.3, 2.4)
         ax = fig.add_subplot()
         idx = np.nonzero(ok)[0]
-        ax.bar(np.arange(idx.size), vals[idx] * 1000,
-               color=[COLOURS.get(styles[int(i)], COLOURS["point"]) for i in idx])
+        # one collection of bars (vertical lines as wide as a bar), not an artist per point
+        width_pt = 0.8 * 400.0 / max(idx.size, 1)
+        ax.vlines(np.arange(idx.size), 0.0, vals[idx] * 1000, linewidth=max(width_pt, 0.3),
+                  colors=[COLOURS.get(styles[int(i)], COLOURS["point"]) for i in idx],
+                  capstyle="butt")
+        ax.set_xlim(-0.6, idx.size - 0.4)
         ax.axhline(0.0, color="black", linewidth=0.6)
         if idx.size <= MAX_LABELS:
             ax.set_xticks(np.arange(idx.size), [str(ids[int(i)]) for i in idx], rotation=90,

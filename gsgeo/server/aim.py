@@ -4,7 +4,9 @@ POST /api/scenes/{scene}/depth, POST /api/scenes/{scene}/views, POST /api/match 
 /api/scenes/{scene}/match (the same, its patches weighted by the scene's splats about the
 click: gsgeo.aim.foreground). The scene routes read the scene's splats, so they need its
 tiles on this server: 404 for an unknown scene, 409 when its tiles are served from a static
-host.
+host. Matches run in the server's bounded pool of image jobs (gsgeo.server.jobs): a few at
+once, a few more queued, any beyond answered 503 with Retry-After; their views' pixels are
+budgeted from the images' headers before any decoding (gsgeo.aim.images).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from gsgeo.errors import InputError
 from gsgeo.limits import DIRECTION_MAX, MAX_ORIGIN_M, SIGMA_PX_MAX, SIGMA_PX_MIN
 from gsgeo.measure import Rays as RayArrays
 from gsgeo.server.api import ErrorBody
+from gsgeo.server.jobs import JobPool
 from gsgeo.server.models import Mat16, Ray, rays_of
 from gsgeo.server.scenes import SceneFolders
 from gsgeo.server.textbody import TextCheckedRoute
@@ -30,6 +33,7 @@ router = APIRouter(prefix="/api", route_class=TextCheckedRoute, tags=["aiming"],
     409: {"model": ErrorBody, "description": "the scene's tiles are on a static host, not here"},
     413: {"model": ErrorBody, "description": "request body over the size limit"},
     422: {"model": ErrorBody, "description": "malformed request; message names the field"},
+    503: {"model": ErrorBody, "description": "too many image matches at once; see Retry-After"},
 })
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -75,6 +79,13 @@ def scene_folder(request: Request, scene: str) -> Path:
         raise ConflictError(f"the tiles of scene {scene!r} are on a static host, not on this "
                             "server: its splats cannot be read here", field="scene")
     return folder
+
+
+def image_jobs(request: Request) -> JobPool:
+    """The server's pool of image jobs: a match runs there, or waits its turn, or is refused
+    (503) when too many wait already (gsgeo.server.jobs)."""
+    pool: JobPool = request.app.state.image_jobs
+    return pool
 
 
 def one_ray(ray: Ray, field: str = "ray") -> RayArrays:
@@ -148,18 +159,19 @@ class MatchAnswer(BaseModel):
 @router.post("/match", response_model=MatchAnswer,
              summary="Find the reference view's click in the target view along its epipolar "
                      "segment")
-def match(body: MatchRequest) -> dict[str, Any]:
-    return match_views(body.reference.model_dump(), body.target.model_dump(),
-                       body.depth.model_dump())
+async def match(body: MatchRequest, request: Request) -> dict[str, Any]:
+    return await image_jobs(request).run(match_views, body.reference.model_dump(),
+                                         body.target.model_dump(), body.depth.model_dump())
 
 
 @router.post("/scenes/{scene}/match", response_model=MatchAnswer,
              summary="Find the reference view's click in the target view, the patches weighted "
                      "by the scene's splats about the click (its outline's background left out)")
-def scene_match(scene: SceneName, body: MatchRequest, request: Request) -> dict[str, Any]:
+async def scene_match(scene: SceneName, body: MatchRequest, request: Request) -> dict[str, Any]:
     folder = scene_folder(request, scene)
-    return match_views(body.reference.model_dump(), body.target.model_dump(),
-                       body.depth.model_dump(), folder, body.model_matrix)
+    return await image_jobs(request).run(match_views, body.reference.model_dump(),
+                                         body.target.model_dump(), body.depth.model_dump(),
+                                         folder, body.model_matrix)
 
 
 class ViewsRequest(BaseModel):

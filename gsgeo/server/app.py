@@ -31,6 +31,7 @@ from gsgeo.server.files import file_response
 from gsgeo.server.guard import BodyTooLarge, Guard, MiB
 from gsgeo.server.hosts import is_loopback
 from gsgeo.server.intersect_pool import IntersectPool
+from gsgeo.server.jobs import Busy, JobPool
 from gsgeo.server.routing import allowed_methods, body_limiter
 from gsgeo.server.scenehosts import hosted_tileset_response, scene_hosts
 from gsgeo.server.scenes import SceneFolders
@@ -64,6 +65,12 @@ class ServerConfig:
     solver_threads: int = 1  # long-lived threads for POST /api/intersect (gsgeo.server.intersect_pool)
     # long-lived threads for POST /api/projects/{pid}/points (0: FastAPI's on-demand pool)
     store_threads: int = 4
+    # heavy jobs (gsgeo.server.jobs): image matches (/api/match, /api/scenes/{scene}/match)
+    # and survey reports at once, and how many more may wait before 503
+    image_jobs: int = 2
+    image_queue: int = 16
+    report_jobs: int = 1
+    report_queue: int = 8
     store_url: str | None = None  # postgresql://... (gsgeo.store.open_store); None: DATA/gsgeo.sqlite
     allowed_hosts: set[str] | None = field(default=None)  # None: derived from host
     # Tiles on a static host (gsgeo.server.scenehosts): the base URL of the scene folders,
@@ -142,6 +149,12 @@ def _install_error_handlers(app: FastAPI) -> None:
         log.error("store: %s", exc)
         return _error(503, f"the project store is busy or unavailable ({exc}); try again")
 
+    @app.exception_handler(Busy)
+    async def busy(_req: Request, exc: Busy) -> JSONResponse:
+        resp = _error(503, str(exc))
+        resp.headers["Retry-After"] = str(exc.retry_after)
+        return resp
+
     @app.exception_handler(GsgeoError)
     async def gsgeo_error(_req: Request, exc: GsgeoError) -> JSONResponse:
         return _error(422, str(exc), exc.field)
@@ -192,6 +205,8 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     intersect_pool = IntersectPool(config.solver_threads)
     store_pool = IntersectPool(config.store_threads, "gsgeo-store") \
         if config.store_threads else None
+    image_jobs = JobPool("image matches", config.image_jobs, config.image_queue)
+    report_jobs = JobPool("reports", config.report_jobs, config.report_queue, retry_after=10)
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
@@ -202,6 +217,8 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
             await store_pool.warm_up(warm_intersect)
         yield
         intersect_pool.close()
+        image_jobs.close()
+        report_jobs.close()
         if store_pool is not None:
             store_pool.close()
         store.close()
@@ -213,6 +230,8 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
     app.state.store = store
     app.state.intersect_pool = intersect_pool
     app.state.store_pool = store_pool
+    app.state.image_jobs = image_jobs
+    app.state.report_jobs = report_jobs
     app.state.projects = projects
     _install_error_handlers(app)
 

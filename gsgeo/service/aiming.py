@@ -15,7 +15,13 @@ import numpy as np
 from gsgeo.aim.camera import Camera
 from gsgeo.aim.depth import depth_hint
 from gsgeo.aim.foreground import foreground_of_click
-from gsgeo.aim.images import decode_image
+from gsgeo.aim.images import (
+    MAX_MATCH_PIXELS,
+    ImageHeader,
+    check_budget,
+    decode_header,
+    image_header,
+)
 from gsgeo.aim.match import View, match_feature
 from gsgeo.aim.splatindex import SplatIndex, scene_index
 from gsgeo.aim.views import suggest_views
@@ -66,19 +72,21 @@ def camera_of(doc: dict[str, Any], field: str) -> Camera:
                           float(doc["width"]), float(doc["height"]), field)
 
 
-def view_of(doc: dict[str, Any], field: str) -> View:
-    """A rendered view of a JSON object (image: base64 PNG/JPEG, origin, camera)."""
+def view_of(doc: dict[str, Any], field: str, head: ImageHeader | None = None) -> View:
+    """A rendered view of a JSON object (image: base64 PNG/JPEG, origin, camera); ``head``:
+    its image's header when already read (gsgeo.aim.images.image_header). The image is
+    decoded only once its size is checked against the camera's canvas."""
     origin = np.asarray(doc.get("origin") or [0.0, 0.0], dtype=np.float64)
-    image = decode_image(doc["image"], f"{field}.image")
+    head = head or image_header(doc["image"], f"{field}.image")
     camera = camera_of(doc["camera"], f"{field}.camera")
-    h, w = image.shape
+    h, w = head.height, head.width
     # an image in device pixels with a camera in CSS pixels would match nothing: say so
     if origin[0] < -1 or origin[1] < -1 or origin[0] + w > camera.width + 1 \
             or origin[1] + h > camera.height + 1:
         raise InputError(f"is {w}x{h} px at origin ({origin[0]:g}, {origin[1]:g}), beyond the "
                          f"{camera.width:g}x{camera.height:g} canvas of its camera: send the "
                          "view (or a crop of it) in CSS pixels, as the camera", field=f"{field}.image")
-    return View(image, origin, camera)
+    return View(decode_header(head), origin, camera)
 
 
 def match_views(reference: dict[str, Any], target: dict[str, Any],
@@ -90,7 +98,9 @@ def match_views(reference: dict[str, Any], target: dict[str, Any],
     value that cannot be used. With ``scene_dir`` (POST /api/scenes/{scene}/match) the
     scene's splats about the depth hint's point weight the patches (gsgeo.aim.foreground:
     the background around an object's outline is left out); ``model_matrix`` (16 numbers,
-    column-major, the tileset's at the click; None: identity) places them as rendered."""
+    column-major, the tileset's at the click; None: identity) places them as rendered.
+    The two images together may hold MAX_MATCH_PIXELS pixels, read from their headers
+    before either is decoded."""
     near, far, hint = (float(depth[k]) for k in ("near_m", "far_m", "depth_m"))
     if not 0.0 <= near <= far:
         raise InputError("near_m must be >= 0 and <= far_m", field="depth.near_m")
@@ -99,8 +109,13 @@ def match_views(reference: dict[str, Any], target: dict[str, Any],
     normal = depth.get("normal_ecef")
     if normal is not None and not np.linalg.norm(normal) > 1e-9:
         raise InputError("must be a non-zero vector", field="depth.normal_ecef")
-    ref = view_of(reference, "reference")
-    tgt = view_of(target, "target")
+    # both headers first: the request's pixel budget is checked before any pixel is decoded
+    heads = [image_header(reference["image"], "reference.image"),
+             image_header(target["image"], "target.image")]
+    check_budget(heads, MAX_MATCH_PIXELS)
+    ref = view_of(reference, "reference", heads[0])
+    tgt = view_of(target, "target", heads[1])
+    del heads
     pixel = np.asarray(reference["pixel"], dtype=np.float64)
     foreground = None
     if scene_dir is not None:

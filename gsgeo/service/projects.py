@@ -784,7 +784,9 @@ class Projects(BuildingService):
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
             cps = [c for c in tx.list_check_points(pid) if c.role == "control"]
-            solved = {q.id for q in tx.list_points(pid) if q.result is not None}
+            # the control's own points only (a few), not every point of the project
+            solved = {c.id for c in cps
+                      if (q := tx.get_point(pid, c.id)) is not None and q.result is not None}
         ctx = scene_frame(self.data_dir, p.scene)
         history = [] if ctx is None else [
             {k: h.get(k) for k in ("version", "kind", "at", "parent", "restores",
@@ -1073,8 +1075,9 @@ class Projects(BuildingService):
         self.follow_scene(pid)
         with self.store.transaction(write=False) as tx:
             p = self._project(tx, pid)
-            pts = tx.list_points(pid)
             cps = [c for c in tx.list_check_points(pid) if c.role == role]
+            # the points of the check points' ids only, not every point of the project
+            pts = [q for q in (tx.get_point(pid, c.id) for c in cps) if q is not None]
         if p.crs is None:
             raise InputError(f"project '{pid}' has no grid CRS; set one to compare with "
                              "check points", field="crs")

@@ -243,6 +243,25 @@ def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
 
 
 
+def report_version(svc: Projects, pid: str) -> str | None:
+    """A text that changes whenever project ``pid``'s report may change: the store's revision
+    (any committed change, by any process) and the state of its scene's tileset.json (the
+    georeference); None when the store cannot tell (then no report may be reused).
+    NotFoundError for an unknown project."""
+    rev = svc.store.revision()
+    p = svc.get_project(pid)
+    if rev is None:
+        return None
+    scene = ""
+    if p.scene and svc.data_dir is not None:
+        try:
+            st = (svc.data_dir / "scenes" / p.scene / "tileset.json").stat()
+            scene = f"{st.st_mtime_ns}.{st.st_size}"
+        except OSError:
+            scene = "none"
+    return f"{rev}:{scene}"
+
+
 def write_report(svc: Projects, pid: str, output: str | Path, *,
                  georeference: JSONObject | None = None) -> JSONObject:
     """Write project ``pid``'s survey report to ``output`` (.pdf, .html or .htm; atomically:
