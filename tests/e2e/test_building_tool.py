@@ -185,7 +185,7 @@ def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
 
     # B1-B6 measured by real clicks on their markers, three views each. The clicks land exactly
     # on a marker's projection, so the splats need not be drawn meanwhile: hidden, they spare
-    # 18 frames of every splat (seconds each in SwiftShader); they are drawn for the model below
+    # 18 frames of every splat (seconds each in SwiftShader); they are drawn again from B on
     page.evaluate("gsgeo.tileset.show = false")
     for cid in CORNERS:
         stored = measure(page, cid, t[cid].ecef)
@@ -194,6 +194,8 @@ def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
         d = np.array([rec["easting"] - t[cid].easting, rec["northing"] - t[cid].northing,
                       rec["height"] - t[cid].height])
         assert np.all(np.abs(d) < POINT_TOL), (cid, d)
+
+    page.evaluate("gsgeo.tileset.show = true")
 
     # B, a view of the whole building, the ground height typed in the panel
     page.keyboard.press("b")
@@ -275,7 +277,6 @@ def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
     # (Escape first drops the selection of the last point, whose rays would cross the picture)
     page.keyboard.press("Escape")
     page.wait_for_function("gsgeo.state.selected === null")
-    page.evaluate("gsgeo.tileset.show = true")
     aim(page, centre, (180.0, 89.0, 40.0, [0.0, 0.0, 0.0]))  # north up
     if not settle(page):
         warnings.warn("the splats were not all drawn in time; the pixel check waits for a steady "
