@@ -183,10 +183,7 @@ def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
     t = truth()
     ground = ground_height()
 
-    # B1-B6 measured by real clicks on their markers, three views each. The clicks land exactly
-    # on a marker's projection, so the splats need not be drawn meanwhile: hidden, they spare
-    # 18 frames of every splat (seconds each in SwiftShader); they are drawn again from B on
-    page.evaluate("gsgeo.tileset.show = false")
+    # B1-B6 measured by real clicks on their markers, three views each
     for cid in CORNERS:
         stored = measure(page, cid, t[cid].ecef)
         rec = stored["record"]
@@ -194,8 +191,6 @@ def test_demo_building_captured_by_clicks_matches_the_truth(server, page):
         d = np.array([rec["easting"] - t[cid].easting, rec["northing"] - t[cid].northing,
                       rec["height"] - t[cid].height])
         assert np.all(np.abs(d) < POINT_TOL), (cid, d)
-
-    page.evaluate("gsgeo.tileset.show = true")
 
     # B, a view of the whole building, the ground height typed in the panel
     page.keyboard.press("b")
