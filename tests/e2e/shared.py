@@ -106,3 +106,30 @@ def box_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def box_server(box_data: Path) -> Iterator[str]:
     """The URL of `gsgeo serve` on the box scene."""
     yield from serve(box_data)
+
+
+def open_demo_page(browser, server: str, pid: str, viewport: dict, *,
+                   draw_splats: bool = True) -> Iterator:
+    """A page of the viewer on the demo scene and project `pid` for a module's lifetime (a
+    fixture's body): console errors collected in ``page.errors``, waits of 120 s (a frame of
+    the demo's 341 816 splats takes seconds in SwiftShader, more on a busy machine; waits are
+    for correctness here, speed is the benchmarks'). With ``draw_splats`` False the splats are
+    hidden once the scene is open (for tests that need no picture of them)."""
+    pg = browser.new_page(viewport=viewport)
+    pg.set_default_timeout(120_000)
+    errors: list[str] = []
+    pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
+    pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+    pg.goto(f"{server}/?scene=demo&project={pid}")
+    if draw_splats:
+        pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
+        pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded")
+    else:
+        pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true && !!gsgeo.tileset",
+                             timeout=90_000)
+        pg.evaluate("gsgeo.tileset.show = false")
+    pg.errors = errors
+    try:
+        yield pg
+    finally:
+        pg.close()

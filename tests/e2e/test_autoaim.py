@@ -26,6 +26,7 @@ import pytest
 
 from gsgeo.demo import place, scene
 from gsgeo.demo.project import PROJECT_ID
+from tests.e2e.shared import open_demo_page
 from tests.e2e.workplace import AIM_JS
 
 pytestmark = pytest.mark.e2e
@@ -56,20 +57,7 @@ def server(demo_server):
 
 @pytest.fixture(scope="module")
 def page(server, browser):
-    pg = browser.new_page(viewport=VIEWPORT)
-    # a frame of the demo's 341 816 splats takes seconds in SwiftShader, more on a busy machine:
-    # waits are for correctness here, speed is benchmarks/autoaim.py's
-    pg.set_default_timeout(120_000)
-    errors: list[str] = []
-    pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
-    pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
-    pg.goto(f"{server}/?scene=demo&project={PROJECT_ID}")
-    pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
-    pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
-                         timeout=120_000)
-    pg.errors = errors
-    yield pg
-    pg.close()
+    yield from open_demo_page(browser, server, PROJECT_ID, VIEWPORT)
 
 
 def first_view(local) -> float:

@@ -19,7 +19,7 @@ import pytest
 
 from gsgeo.crs import to_grid_many
 from gsgeo.demo import place, scene
-from tests.e2e.shared import demo_project_copy
+from tests.e2e.shared import demo_project_copy, open_demo_page
 from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS
 from tests.e2e.workplace import AIM_JS, ARTIFACTS
 
@@ -52,20 +52,7 @@ def server(demo_server):
 
 @pytest.fixture(scope="module")
 def page(server, browser):
-    pg = browser.new_page(viewport=VIEWPORT)
-    # a frame of the demo's 341 816 splats takes seconds in SwiftShader, more on a busy machine:
-    # waits are for correctness here, speed is benchmarks/autoaim.py's
-    pg.set_default_timeout(120_000)
-    errors: list[str] = []
-    pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
-    pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
-    pg.goto(f"{server}/?scene=demo&project={PID}")
-    pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true", timeout=90_000)
-    pg.wait_for_function("gsgeo.tileset && gsgeo.tilesReady && gsgeo.tileset.tilesLoaded",
-                         timeout=120_000)
-    pg.errors = errors
-    yield pg
-    pg.close()
+    yield from open_demo_page(browser, server, PID, VIEWPORT)
 
 
 def truth() -> dict[str, place.TruthPoint]:

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from gsgeo.demo import place
-from tests.e2e.shared import demo_project_copy
+from tests.e2e.shared import demo_project_copy, open_demo_page
 from tests.e2e.workplace import AIM_JS
 
 pytestmark = pytest.mark.e2e
@@ -62,22 +62,9 @@ def server(demo_server):
 
 @pytest.fixture(scope="module")
 def page(server, browser):
-    pg = browser.new_page(viewport=VIEWPORT)
-    # a frame of the demo's 341 816 splats takes seconds in SwiftShader, more on a busy machine:
-    # waits are for correctness here, speed is benchmarks/autoaim.py's
-    pg.set_default_timeout(120_000)
-    errors: list[str] = []
-    pg.on("console", lambda m: m.type == "error" and errors.append(m.text))
-    pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
-    pg.goto(f"{server}/?scene=demo&project={PID}")
-    pg.wait_for_function("window.gsgeo && window.gsgeo.ready === true && !!gsgeo.tileset",
-                         timeout=90_000)
     # the splats are not drawn: SwiftShader takes seconds a frame for them, and nothing
     # here depends on them (the server answers /depth and /views from the tiles' files)
-    pg.evaluate("gsgeo.tileset.show = false")
-    pg.errors = errors
-    yield pg
-    pg.close()
+    yield from open_demo_page(browser, server, PID, VIEWPORT, draw_splats=False)
 
 
 @pytest.fixture()
