@@ -2,17 +2,19 @@
 `gsgeo serve` on loopback.
 
     python benchmarks/report.py [--points 5000] [--lines 1000] [--concurrent 3]
-        [--profile FILE.prof]
+        [--settle SECONDS] [--profile FILE.prof]
 
 The project ``bench`` (built once in a temporary data directory, as benchmarks/ogc.py builds
 its own: one measured point copied ``--points`` times across 1 km, every tenth of them a check
 point 1-2 cm off, ``--lines`` two-point lines) is reported by the server:
 
 1. one PDF, then one HTML, each timed from request to the last byte (target: the PDF of 5 000
-   points in <= 10 s);
+   points in <= 10 s); ``--settle S``: the first request S seconds after the server answers
+   (default 0: at once, before its background warm-up of the report renderer is done);
 2. ``--concurrent`` PDF requests at once (as a viewer's users might click "Report"), each
    timed, and the server's resident memory (RSS, /proc) before, at its peak and 5 s after;
-3. one more PDF request after them, which may reuse the report just made (unchanged project).
+3. one more PDF request after them, which may reuse the report just made (unchanged project);
+4. one PDF alone after another change: a later report on a warm server.
 
 ``--profile FILE``: instead, render the PDF in this process under cProfile and write the
 statistics to FILE (the top 25 by cumulative time are printed).
@@ -91,6 +93,13 @@ def get(base: str, fmt: str) -> tuple[float, int, int]:
     return time.perf_counter() - t0, r.status_code, len(r.content)
 
 
+def change(base: str) -> None:
+    """A change to the project (a new description each time, also in a kept --data project):
+    the next reports cannot reuse those made before."""
+    httpx.patch(f"{base}/api/projects/{PID}", json={"description": f"changed {time.time()}"},
+                timeout=60).raise_for_status()
+
+
 def profile(data: Path, out: str) -> None:
     from gsgeo.report import render
     from gsgeo.service.reporting import report_data
@@ -114,6 +123,8 @@ def main() -> int:
     ap.add_argument("--points", type=int, default=5000)
     ap.add_argument("--lines", type=int, default=1000)
     ap.add_argument("--concurrent", type=int, default=3)
+    ap.add_argument("--settle", type=float, default=0.0, metavar="SECONDS",
+                    help="wait this long after the server answers before the first request")
     ap.add_argument("--profile", metavar="FILE.prof")
     ap.add_argument("--data", metavar="DIR", help="keep the project in DIR (built there once) "
                                                   "instead of a temporary directory")
@@ -131,13 +142,13 @@ def main() -> int:
         proc, base = start_server(data)
         try:
             print(f"server RSS at start: {rss_mb(proc.pid):.0f} MB")
+            time.sleep(args.settle)
             for fmt in ("pdf", "html"):
                 dt, status, size = get(base, fmt)
                 print(f"{fmt}: {dt:.1f} s, HTTP {status}, {size / 1e6:.2f} MB; "
                       f"server RSS {rss_mb(proc.pid):.0f} MB")
             # a change to the project: the next reports cannot reuse the ones just made
-            httpx.patch(f"{base}/api/projects/{PID}", json={"description": "changed"},
-                        timeout=60).raise_for_status()
+            change(base)
             before = rss_mb(proc.pid)
             peak = [before]
             stop = threading.Event()
@@ -162,6 +173,9 @@ def main() -> int:
                   f"5 s after {rss_mb(proc.pid):.0f} MB")
             dt, status, _ = get(base, "pdf")
             print(f"one more PDF of the unchanged project: {dt:.2f} s (HTTP {status})")
+            change(base)
+            dt, status, _ = get(base, "pdf")
+            print(f"a later PDF, alone (project changed again): {dt:.1f} s (HTTP {status})")
         finally:
             proc.terminate()
             proc.wait(30)

@@ -111,6 +111,9 @@ Block = Facts | Table | Figure | Notes | Listing
 #: cell of a table as its own box (5 000 points x 14 columns: about 50 s and gigabytes); a
 #: listing line is one box, about 15 times cheaper, and holds the same text.
 LISTING_ROWS = 200
+#: Between a listing's columns: one space (every space is a glyph WeasyPrint shapes and
+#: draws; two were an eighth of a points row).
+LISTING_GAP = " "
 #: Rows per block of a listing: with its header, one block fills most of an A4 page.
 LISTING_BLOCK_ROWS = 80
 
@@ -153,7 +156,7 @@ def _header_lines(title: str, width: int) -> list[str]:
 
 def listing(table: Table) -> Listing:
     """``table`` as fixed-width text: each column as wide as its widest value or title word,
-    numeric columns right-aligned, columns two spaces apart, titles wrapped at spaces and
+    numeric columns right-aligned, columns LISTING_GAP apart, titles wrapped at spaces and
     set at the foot of the header; no value is ever cut (a longer one shifts the rest of its
     line). Every row is kept, in order; the rows' marks (``row_classes``) are not drawn."""
     widths = [max([len(max(c.split() or [""], key=len))] + [len(r[j]) for r in table.rows])
@@ -163,8 +166,8 @@ def listing(table: Table) -> Listing:
     titles = [[""] * (depth - len(t)) + t for t in titles]
 
     def line(cells: Sequence[str]) -> str:
-        return "  ".join(c.rjust(w) if num else c.ljust(w) for c, w, num
-                         in zip(cells, widths, table.numeric, strict=True)).rstrip()
+        return LISTING_GAP.join(c.rjust(w) if num else c.ljust(w) for c, w, num
+                                in zip(cells, widths, table.numeric, strict=True)).rstrip()
 
     header = [line([t[k] for t in titles]) for k in range(depth)]
     header.append("-" * max(len(h) for h in header))
