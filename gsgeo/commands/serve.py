@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
                           store_url=store_url,
                           web_dir=Path(args.web) if args.web else None,
                           solver_threads=solver_threads, store_threads=store_threads,
-                          warm_reports=True, scenes_url=hosts.base,
+                          scenes_url=hosts.base,
                           scene_urls=dict(hosts.folders))
     app = create_app(config)  # opens (and migrates) the store before accepting requests
     common = {"host": args.host, "port": args.port, "log_level": log_level,

@@ -39,22 +39,4 @@ def render(data: JSONObject, fmt: str) -> bytes:
     return html_to_pdf(html)
 
 
-#: A page in the report's fonts (regular, bold, fixed-width): what a first PDF would load.
-WARM_HTML = ('<!doctype html><html><body style="font-family: \'DejaVu Sans\', sans-serif">'
-             '<h1>warm-up</h1><p>P1 σ 1.0</p><pre style="font-family: \'DejaVu Sans Mono\', '
-             'monospace">P1  530055.016  13.8</pre></body></html>')
-
-
-def warm_up() -> None:
-    """Do once what a server's first report would (seconds): import jinja2, matplotlib and
-    WeasyPrint, draw a small plan, and lay out a page in the report's fonts (fontconfig's
-    set-up and font files). ReportError when WeasyPrint cannot run here."""
-    from gsgeo.report import plots
-    from gsgeo.report.html import render_html  # noqa: F401 (jinja2 and the content module)
-    from gsgeo.report.pdf import html_to_pdf
-
-    plots.points_plan(["A", "B"], [0.0, 1.0], [0.0, 1.0], [0.01, 0.02], [0.01, 0.02], "warm-up")
-    html_to_pdf(WARM_HTML)
-
-
-__all__ = ["FORMATS", "MEDIA_TYPES", "format_from_suffix", "render", "warm_up"]
+__all__ = ["FORMATS", "MEDIA_TYPES", "format_from_suffix", "render"]

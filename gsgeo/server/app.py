@@ -12,7 +12,6 @@ import json
 import logging
 import os
 import sqlite3
-import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
@@ -72,9 +71,6 @@ class ServerConfig:
     image_queue: int = 16
     report_jobs: int = 1
     report_queue: int = 8
-    # import and load the report renderer (fonts, matplotlib) in the background at start, so
-    # the first report does not pay for it (gsgeo serve: on; tests' apps: off)
-    warm_reports: bool = False
     store_url: str | None = None  # postgresql://... (gsgeo.store.open_store); None: DATA/gsgeo.sqlite
     allowed_hosts: set[str] | None = field(default=None)  # None: derived from host
     # Tiles on a static host (gsgeo.server.scenehosts): the base URL of the scene folders,
@@ -219,9 +215,6 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
         await intersect_pool.warm_up(warm_intersect)
         if store_pool is not None:
             await store_pool.warm_up(warm_intersect)
-        if config.warm_reports:
-            threading.Thread(target=_warm_reports, name="gsgeo-report-warm-up",
-                             daemon=True).start()
         yield
         intersect_pool.close()
         image_jobs.close()
@@ -318,17 +311,6 @@ def create_app(config: ServerConfig, store: Store | None = None) -> FastAPI:
 CONFIG_ENV = "GSGEO_SERVE_CONFIG"
 
 
-def _warm_reports() -> None:
-    """gsgeo.report.warm_up on a background thread: a failure (no WeasyPrint here) is logged;
-    the report requests then answer it."""
-    from gsgeo.report import warm_up
-
-    try:
-        warm_up()
-    except Exception as exc:  # noqa: BLE001 (logged: the reports themselves raise it)
-        log.warning("report warm-up failed: %s", exc)
-
-
 def config_to_env(config: ServerConfig) -> str:
     """The config as JSON, for worker processes started by uvicorn (``app_from_env``)."""
     return json.dumps({"data_dir": str(config.data_dir), "host": config.host,
@@ -337,7 +319,6 @@ def config_to_env(config: ServerConfig) -> str:
                        "max_body": config.max_body, "max_upload": config.max_upload,
                        "solver_threads": config.solver_threads,
                        "store_threads": config.store_threads, "store_url": config.store_url,
-                       "warm_reports": config.warm_reports,
                        "scenes_url": config.scenes_url, "scene_urls": config.scene_urls,
                        "allowed_hosts": sorted(config.allowed_hosts)
                        if config.allowed_hosts is not None else None})
