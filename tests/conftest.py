@@ -42,12 +42,22 @@ def white_sculpture_rebuilt(tmp_path_factory):
     return work / "ours", rebuild_ply_and_tiles(WHITE_SCULPTURE, work, work / "ours")
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The browser tests (tests/e2e/) last: the other worker's modules are done by the time
+    they start, so they run as they would alone. SwiftShader draws on both cores, and a frame
+    of every splat that takes seconds alone takes far longer beside another job, which made
+    the waits of the browser tests flaky (an extra frame of the globe, a click in a long
+    frame). The order within each part is kept."""
+    items.sort(key=lambda item: "e2e" in item.path.parts)
+
+
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     """pytest-xdist's scheduler for the suite (pyproject.toml's addopts: two workers): every
     test module whole on one worker (its module fixtures, servers and demo builds among them,
     made once), and the browser tests (tests/e2e/) all together on one worker: they share one
     Chromium, one demo and one box scene (tests/e2e/shared.py), and two SwiftShader renderers
-    at once would only slow each other. They are collected first, so they start first.
+    at once would only slow each other. They are collected last, so they start when the other
+    modules have been handed out (pytest_collection_modifyitems).
     (xdist's own ``--dist loadgroup`` marks do not reach it under pytest 9.2: the group is
     written into a node id that pytest no longer reads.)"""
     from xdist.scheduler import LoadScopeScheduling

@@ -154,8 +154,13 @@ def station(page, lead: place.TruthPoint, ids: list[str]) -> list[dict]:
     view = [first_view(lead.local), ELEVATION, RANGE, OFFSET]
     page.evaluate(AIM_JS, [list(lead.ecef), *view])
     aims = {pid: page.evaluate(WINDOW_JS, list(truth(pid).ecef)) for pid in ids}
+    # drawn, and the globe's tiles all loaded: a tile that arrives later asks Cesium for a
+    # frame of its own (of every splat), which is the globe's, not the measuring's
     page.wait_for_function(f"gsgeo.still.shown() === null && gsgeo.renderer.framesOfAll > {f0}"
-                           " && gsgeo.renderer.settled()", timeout=180_000, polling=200)
+                           " && gsgeo.renderer.settled() && gsgeo.viewer.scene.globe.tilesLoaded",
+                           timeout=180_000, polling=200)
+    page.wait_for_function("gsgeo.renderer.settled() && gsgeo.viewer.scene.globe.tilesLoaded",
+                           timeout=180_000, polling=200)
     w, h = aims[ids[0]]["canvas"]
     for pid, a in aims.items():
         assert a["dist"] < 1e-5, a  # the projection and Cesium's pick ray agree

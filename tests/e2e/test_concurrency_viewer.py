@@ -15,9 +15,7 @@ pytestmark = pytest.mark.e2e
 
 
 
-@pytest.fixture(scope="module")
-def server(box_server):
-    return box_server
+data_dir, server = workplace.data_dir, workplace.server  # a box scene and server of its own
 
 
 def test_a_change_on_a_stale_point_is_refused_and_said(server, browser):

@@ -17,6 +17,7 @@ import pyproj
 import pytest
 
 from tests.e2e.scene import MARKERS
+from tests.e2e.shared import require_browser, serve
 from tests.e2e.tiles_page import ALL_SPLATS_DRAWN_JS
 from tests.e2e.workplace import (
     AIM_JS,
@@ -24,6 +25,7 @@ from tests.e2e.workplace import (
     SCENE,
     VIEWPOINTS,
     enu_to_ecef,
+    make_data_dir,
     up_vector,
 )
 
@@ -36,14 +38,15 @@ TO_GEO = pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
 
 
 @pytest.fixture(scope="module")
-def data_dir(box_data):
-    """The session's box scene (tests/e2e/conftest.py), shared with the other box modules."""
-    return box_data
+def data_dir(tmp_path_factory):
+    """A box scene of this module's own (tests/e2e/workplace.py's make_data_dir)."""
+    require_browser()
+    return make_data_dir(tmp_path_factory.mktemp("workplace"))
 
 
 @pytest.fixture(scope="module")
-def server(box_server):
-    return box_server
+def server(data_dir):
+    yield from serve(data_dir)
 
 
 @pytest.fixture(scope="module")
