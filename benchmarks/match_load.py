@@ -34,6 +34,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
+from benchdata import rss_mb  # noqa: E402
 from servertools import start_server  # noqa: E402
 
 
@@ -54,14 +55,6 @@ def body(ref_wh: tuple[int, int], tgt_wh: tuple[int, int]) -> dict:
                           "pixel": [rw / 2, rh / 2]},
             "target": {"image": flat_png(tw, th), "camera": camera(tw, th)},
             "depth": {"near_m": 5.0, "far_m": 15.0, "depth_m": 10.0}}
-
-
-def rss_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def burst(base: str, pid: int, doc: dict, n: int) -> None:

@@ -30,9 +30,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
+from benchdata import store_copies  # noqa: E402
 from servertools import LONDON, ecef_of, rays_at, start_server  # noqa: E402
 
-from gsgeo.service import PointRecord, open_projects  # noqa: E402
+from gsgeo.service import open_projects  # noqa: E402
 
 PID = "bench"
 
@@ -51,17 +52,7 @@ def build(data: Path, n: int) -> None:
                                    "rays": rays_at(ecef_of(*LONDON), 4)})
         assert seed.result is not None
         t0 = time.perf_counter()
-        rng = np.random.default_rng(1)
-        de, dn = rng.uniform(-500, 500, n), rng.uniform(-500, 500, n)
-        with svc.store.transaction() as tx:
-            tx.delete_point(PID, "P0")
-            for i in range(n):
-                res = dict(seed.result)
-                res.update(point_id=f"P{i + 1}", code=("lamp", "tree", "kerb")[i % 3],
-                           easting=res["easting"] + de[i], northing=res["northing"] + dn[i],
-                           lon=res["lon"] + de[i] / 69_400.0, lat=res["lat"] + dn[i] / 111_200.0)
-                tx.insert_point(PointRecord(project_id=PID, id=f"P{i + 1}", rays=seed.rays,
-                                            code=res["code"], result=res, solved_rev=0))
+        store_copies(svc, PID, seed, n, np.random.default_rng(1))
         print(f"stored {n} points in {time.perf_counter() - t0:.1f} s")
     finally:
         svc.store.close()

@@ -39,9 +39,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
+from benchdata import rss_mb, store_copies  # noqa: E402
 from servertools import LONDON, ecef_of, rays_at, start_server  # noqa: E402
 
-from gsgeo.service import PointRecord, open_projects  # noqa: E402
+from gsgeo.service import open_projects  # noqa: E402
 from gsgeo.service.checkpoints import CheckPointRow  # noqa: E402
 
 PID = "bench"
@@ -57,16 +58,7 @@ def build(data: Path, n: int, n_lines: int) -> None:
                                    "rays": rays_at(ecef_of(*LONDON), 4, ifov=0.0005)})
         assert seed.result is not None
         rng = np.random.default_rng(1)
-        de, dn = rng.uniform(-500, 500, n), rng.uniform(-500, 500, n)
-        with svc.store.transaction() as tx:
-            tx.delete_point(PID, "P0")
-            for i in range(n):
-                res = dict(seed.result)
-                res.update(point_id=f"P{i + 1}", code=("lamp", "tree", "kerb")[i % 3],
-                           easting=res["easting"] + de[i], northing=res["northing"] + dn[i],
-                           lon=res["lon"] + de[i] / 69_400.0, lat=res["lat"] + dn[i] / 111_200.0)
-                tx.insert_point(PointRecord(project_id=PID, id=f"P{i + 1}", rays=seed.rays,
-                                            code=res["code"], result=res, solved_rev=0))
+        de, dn = store_copies(svc, PID, seed, n, rng)
         e0, n0, h0 = (seed.record or {})["easting"], seed.record["northing"], seed.record["height"]
         off = rng.normal(0.0, 0.015, (n, 3))
         svc.add_check_points(PID, [CheckPointRow(f"P{i + 1}", e0 + de[i] + off[i, 0],
@@ -77,14 +69,6 @@ def build(data: Path, n: int, n_lines: int) -> None:
                                            "points": [f"P{k % n + 1}", f"P{(k + 7) % n + 1}"]})
     finally:
         svc.store.close()
-
-
-def rss_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def get(base: str, fmt: str) -> tuple[float, int, int]:
