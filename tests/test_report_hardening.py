@@ -179,8 +179,62 @@ def test_a_long_points_table_is_a_listing_with_every_point(math_dir):
     for r in data["points"][::37]:  # the numbers as the table would give them
         line = re.search(rf"^{r['point_id']} .*$", html, flags=re.M).group()
         assert fmt_m(r["easting"]) in line and fmt_m(r["northing"]) in line
-    pdf = html_to_pdf(html)
+    pdf = render(data, "pdf")
     text = " ".join(p.extract_text() for p in pypdf.PdfReader(io.BytesIO(pdf)).pages)
+    assert set(re.findall(r"\bP\d+\b", text)) >= {f"P{i + 1}" for i in range(250)}
+
+
+def listing_lines(pdf: bytes) -> dict[str, tuple[int, float, float]]:
+    """Each listed point's line in ``pdf`` (by id): its page and the left end of its baseline
+    in PDF points, as pypdf reads them (through form XObjects too)."""
+    lines: dict[str, tuple[int, float, float]] = {}
+    for i, page in enumerate(pypdf.PdfReader(io.BytesIO(pdf)).pages):
+        def seen(text, cm, tm, font, size, i=i):
+            if m := re.match(r"(P\d+) ", text.strip()):
+                x, y = pypdf.mult(tm, cm)[4:]
+                lines.setdefault(m.group(1), (i, x, y))
+        page.extract_text(visitor_text=seen)
+    return lines
+
+
+def test_the_pdf_draws_listings_where_weasyprint_would_have_set_them(math_dir):
+    """The listing text is drawn outside WeasyPrint's text layout (its cost): every line on
+    the page and at the place WeasyPrint's own text would have it (within 1 pt), searchable."""
+    from gsgeo.report.content import build_report
+    from gsgeo.report.html import render_html
+
+    svc = open_projects(math_dir)
+    try:
+        data = many_points(report_data(svc, "money"), 250)
+    finally:
+        svc.store.close()
+    drawn = listing_lines(render(data, "pdf"))
+    set_by_weasyprint = listing_lines(html_to_pdf(render_html(build_report(data))))
+    assert set(drawn) == set(set_by_weasyprint) == {f"P{i + 1}" for i in range(250)}
+    for pid, (page, x, y) in set_by_weasyprint.items():
+        assert drawn[pid][0] == page, pid
+        assert abs(drawn[pid][1] - x) < 1 and abs(drawn[pid][2] - y) < 1, (pid, drawn[pid], x, y)
+    pages = {page for page, _, _ in drawn.values()}
+    assert len(pages) == 4  # 80 rows a page
+
+
+def test_a_listing_the_mono_font_cannot_draw_stays_weasyprint_text(math_dir):
+    """Right-to-left or combining text, or a character the listing font lacks, needs shaping:
+    such a listing is set by WeasyPrint (Pango), not drawn glyph by glyph."""
+    from gsgeo.report.listing_pages import drawable
+
+    assert drawable("P1 kerb 530012.688 Ünïcödé Ωμέγα Жук ±σ—\nP2")
+    for text in ("P1 شجرة", "P1 עץ", "P1 e\u0301", "P1 樹", "P1\tkerb"):
+        assert not drawable(text), text
+    svc = open_projects(math_dir)
+    try:
+        data = many_points(report_data(svc, "money"), 250)
+    finally:
+        svc.store.close()
+    data["points"] = [r | {"code": "شجرة"} for r in data["points"]]
+    html = render(data, "html").decode()
+    assert html.count("شجرة") == 250
+    text = " ".join(p.extract_text() for p in pypdf.PdfReader(io.BytesIO(render(data, "pdf"))).pages)
     assert set(re.findall(r"\bP\d+\b", text)) >= {f"P{i + 1}" for i in range(250)}
 
 

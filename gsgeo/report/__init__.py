@@ -31,12 +31,12 @@ def render(data: JSONObject, fmt: str) -> bytes:
 
     if fmt not in FORMATS:
         raise InputError(f"unknown report format '{fmt}'; use html or pdf", field="format")
-    html = render_html(build_report(data))
+    report = build_report(data)
     if fmt == "html":
-        return html.encode("utf-8")
-    from gsgeo.report.pdf import html_to_pdf
+        return render_html(report).encode("utf-8")
+    from gsgeo.report.pdf import report_to_pdf
 
-    return html_to_pdf(html)
+    return report_to_pdf(report)
 
 
 __all__ = ["FORMATS", "MEDIA_TYPES", "format_from_suffix", "render"]

@@ -105,7 +105,19 @@ class Listing:
     kind: str = "listing"
 
 
-Block = Facts | Table | Figure | Notes | Listing
+@dataclass
+class ListingSpace:
+    """Where a Listing's blocks go in the PDF: empty spaces of their heights (points), one per
+    block, with anchors ``{anchor}-{k}`` (gsgeo.report.pdf draws the text into them)."""
+
+    anchor: str
+    heights_pt: list[float]
+    texts: list[str]
+    caption: str = ""
+    kind: str = "listing_space"
+
+
+Block = Facts | Table | Figure | Notes | Listing | ListingSpace
 
 #: A table of more rows than this is set as a Listing. WeasyPrint lays out and paints every
 #: cell of a table as its own box (5 000 points x 14 columns: about 50 s and gigabytes); a
@@ -116,6 +128,9 @@ LISTING_ROWS = 200
 LISTING_GAP = " "
 #: Rows per block of a listing: with its header, one block fills most of an A4 page.
 LISTING_BLOCK_ROWS = 80
+#: A listing's font size (points) and line height (as a multiple of it).
+LISTING_FONT_PT = 6.5
+LISTING_LINE_HEIGHT = 1.25
 
 
 @dataclass

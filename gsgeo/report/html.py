@@ -11,7 +11,7 @@ from functools import cache
 
 import jinja2
 
-from gsgeo.report.content import Report
+from gsgeo.report.content import LISTING_FONT_PT, LISTING_LINE_HEIGHT, Report
 
 TEMPLATE = "report.html"
 
@@ -25,4 +25,5 @@ def _environment() -> jinja2.Environment:
 
 def render_html(report: Report) -> str:
     """The report as an HTML document (UTF-8 text)."""
-    return _environment().get_template(TEMPLATE).render(report=report)
+    return _environment().get_template(TEMPLATE).render(
+        report=report, listing_font_pt=LISTING_FONT_PT, listing_line_height=LISTING_LINE_HEIGHT)
