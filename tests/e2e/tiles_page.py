@@ -23,10 +23,13 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader",
 #: JavaScript predicate on a Cesium3DTileset: its Gaussian splat primitive holds one snapshot
 #: of every selected splat, sorted and ready to draw. CesiumJS 1.145 (pinned) has no public
 #: signal for it, so this reads the primitive's snapshot fields (revisit on a Cesium upgrade).
+#: In gsgeo's viewer also its renderer settled: the splats drawn, not waiting (still.js holds
+#: them back in a software renderer while the globe loads its tiles for a new view).
 ALL_SPLATS_DRAWN_JS = """(t) => { const p = t && t.gaussianSplatPrimitive;
   const n = t ? t.statistics.numberOfPointsSelected : 0;
+  const r = window.gsgeo && window.gsgeo.renderer;
   return !!p && t.show && t.tilesLoaded && n > 0 && p._numSplats === n &&
-    !p._pendingSnapshot && !p._needsSnapshotRebuild && !!p._drawCommand; }"""
+    !p._pendingSnapshot && !p._needsSnapshotRebuild && !!p._drawCommand && (!r || r.settled()); }"""
 
 PAGE = """<!doctype html>
 <html><head><meta charset="utf-8">

@@ -14,6 +14,11 @@ import { sameView, viewOf } from "./overlay.js";
 
 /** How long (ms) the splats may wait for the globe's tiles after the still goes. */
 const GLOBE_WAIT_MS = 5000;
+/** Splats from which a new view's splats wait for the globe in a software renderer: below, a
+ *  frame of every splat costs about what the wait does (the 12 880-splat box scene of the
+ *  tests: a tenth of a second), above it costs seconds (the demo's 341 816: 3-7 s at 1280 x
+ *  720 in SwiftShader on two cores). */
+const GLOBE_WAIT_SPLATS = 100000;
 
 let hiddenBy = 0;
 let shownAgain = null;
@@ -71,10 +76,32 @@ export class Still {
     scene.postUpdate.addEventListener(() => {
       if (this.view && !this.keepers && !this.valid()) this.drop();
       else if (this.releasing) this.release(false);
+      else this.waitForGlobe();
     });
     this.software = false; // set by the page: a software renderer (render.js's isSoftwareRenderer)
     this.releasing = null; // {hold, since}: the splats given back once the globe is drawn
+    this.heldAt = null; // the view for which the splats last waited for the globe
     renderer.waitFor(() => this.releasing !== null);
+  }
+
+  /** In a software renderer, a view of a large scene (GLOBE_WAIT_SPLATS) whose globe has tiles
+   *  to load (the camera moved, the page opened): the splats wait for them as after a still
+   *  (release), at most GLOBE_WAIT_MS once per view. Each tile loaded asks Cesium for a frame,
+   *  and each frame of every splat costs seconds there: a camera move took 4 to 9 such frames
+   *  (25-40 s for the demo at 1280 x 720), and now takes the globe's frames (next to nothing)
+   *  and one of the splats. On a GPU the wait would make the splats blink: none there. */
+  waitForGlobe() {
+    if (!this.software || this.view || this.keepers || hiddenBy) return;
+    const globe = this.viewer.scene.globe;
+    if (!globe || !globe.show || globe.tilesLoaded) return;
+    const t = this.tileset();
+    if (!t || !t.gaussianSplatPrimitive || !(t.gaussianSplatPrimitive._numSplats >= GLOBE_WAIT_SPLATS)) return;
+    const now = viewOf(this.viewer);
+    if (!now || sameView(this.heldAt, now) || splatsHeld(t) || !splatsHoldable(t)) return;
+    this.heldAt = now;
+    this.releasing = { hold: holdSplats(t), since: performance.now() };
+    this.globeCalm = 0;
+    this.viewer.scene.requestRender();
   }
 
   /** The view the still shows, or null when there is none (for the overlay). */
