@@ -131,12 +131,25 @@ def _posted(kind: str):
     return lambda r: r.url.endswith(f"/{kind}") and r.request.method == "POST"
 
 
+#: The distance (m) of a captured ray from a world point, with what the viewer recorded of it.
+RAY_MISS_JS = """([i, target]) => { const r = gsgeo.state.measure.rays[i];
+  const w = [0, 1, 2].map((k) => target[k] - r.origin[k]);
+  const along = w[0] * r.direction[0] + w[1] * r.direction[1] + w[2] * r.direction[2];
+  const miss = Math.hypot(...[0, 1, 2].map((k) => w[k] - along * r.direction[k]));
+  const c = gsgeo.viewer.scene.canvas;
+  return {miss, pixel: r.pixel, viewport: r.viewport, canvas: [c.clientWidth, c.clientHeight]}; }"""
+
+
 def _measure(p: Page, target_rendered, views, code: str = "") -> dict:
     p.page.keyboard.press("m")
     p.page.wait_for_selector("#measure-panel:not([hidden])")
     for i, view in enumerate(views):
-        p.click_world(target_rendered, view)
+        aim = p.click_world(target_rendered, view)
         p.wait_rays(i + 1)
+        # each ray through the target, where it was clicked (a wrong ray says here how it was
+        # taken, not later as a point half a metre off)
+        got = p.page.evaluate(RAY_MISS_JS, [i, list(map(float, target_rendered))])
+        assert got["miss"] < 1e-3, (i, aim, got)
         if i >= 1:
             p.wait_solution()
     if code:
