@@ -43,21 +43,24 @@ def white_sculpture_rebuilt(tmp_path_factory):
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The browser tests (tests/e2e/) last: the other worker's modules are done by the time
-    they start, so they run as they would alone. SwiftShader draws on both cores, and a frame
-    of every splat that takes seconds alone takes far longer beside another job, which made
-    the waits of the browser tests flaky (an extra frame of the globe, a click in a long
-    frame). The order within each part is kept."""
+    """The browser tests (tests/e2e/) last: they start when the other modules are handed out,
+    so that the two groups of them (pytest_xdist_make_scheduler) run beside each other rather
+    than beside the CPU-heavy modules. The order within each part is kept."""
     items.sort(key=lambda item: "e2e" in item.path.parts)
+
+
+#: The browser tests on the demo scene (tests/e2e/shared.py's demo build and server): one
+#: group, the other browser tests (the box scene, static hosts, the real scene) another.
+DEMO_BROWSER_MODULES = ("test_autoaim.py", "test_building_tool.py", "test_guide.py")
 
 
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     """pytest-xdist's scheduler for the suite (pyproject.toml's addopts: two workers): every
     test module whole on one worker (its module fixtures, servers and demo builds among them,
-    made once), and the browser tests (tests/e2e/) all together on one worker: they share one
-    Chromium, one demo and one box scene (tests/e2e/shared.py), and two SwiftShader renderers
-    at once would only slow each other. They are collected last, so they start when the other
-    modules have been handed out (pytest_collection_modifyitems).
+    made once), and the browser tests (tests/e2e/) in two groups, each whole on one worker:
+    those on the demo scene (one demo build and server) and the others (one box scene). Each
+    group shares one Chromium. They are collected last, so each starts when a worker is free
+    of the other modules (pytest_collection_modifyitems), and the two run side by side.
     (xdist's own ``--dist loadgroup`` marks do not reach it under pytest 9.2: the group is
     written into a node id that pytest no longer reads.)"""
     from xdist.scheduler import LoadScopeScheduling
@@ -65,6 +68,8 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     class ModulesWithTheBrowserTestsTogether(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             module = nodeid.split("::", 1)[0]
-            return "tests/e2e/" if module.startswith("tests/e2e/") else module
+            if not module.startswith("tests/e2e/"):
+                return module
+            return "tests/e2e/ (demo)" if module.endswith(DEMO_BROWSER_MODULES) else "tests/e2e/"
 
     return ModulesWithTheBrowserTestsTogether(config, log)
