@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import hypothesis_profiles  # noqa: F401  (loads the Hypothesis profile: GSGEO_HYPOTHESIS=ci|long)
@@ -43,24 +44,41 @@ def white_sculpture_rebuilt(tmp_path_factory):
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The browser tests (tests/e2e/) last: they start when the other modules are handed out,
-    so that the two groups of them (pytest_xdist_make_scheduler) run beside each other rather
-    than beside the CPU-heavy modules. The order within each part is kept."""
-    items.sort(key=lambda item: "e2e" in item.path.parts)
+    """The browser tests (tests/e2e/) first: the worker that takes them starts with them,
+    the other one with the other modules, at a lower priority (pytest_runtest_setup). The
+    order within each part is kept."""
+    items.sort(key=lambda item: "e2e" not in item.path.parts)
 
 
-#: The browser tests on the demo scene (tests/e2e/shared.py's demo build and server): one
-#: group, the other browser tests (the box scene, static hosts, the real scene) another.
-DEMO_BROWSER_MODULES = ("test_autoaim.py", "test_building_tool.py", "test_guide.py")
+#: Whether this process has chosen its priority (pytest_runtest_setup).
+_PRIORITY_SET = False
+#: The nice value of the worker that does not run the browser tests.
+OTHER_WORKER_NICE = 10
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """On two workers, the one that starts with something other than the browser tests (which
+    come first) runs at nice OTHER_WORKER_NICE for the rest of the session, its servers and
+    PostgreSQL too. SwiftShader draws every frame on both cores with threads that wait by
+    spinning: beside a busy worker of equal priority the browser tests took 2-4 times their
+    time alone (the building tool 270 s instead of 70 s), more than the other worker gained.
+    At a lower priority the other worker takes the cores the browser leaves idle."""
+    global _PRIORITY_SET
+    if _PRIORITY_SET:
+        return
+    _PRIORITY_SET = True
+    if os.environ.get("PYTEST_XDIST_WORKER") and "e2e" not in item.path.parts:
+        os.nice(OTHER_WORKER_NICE)
 
 
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     """pytest-xdist's scheduler for the suite (pyproject.toml's addopts: two workers): every
     test module whole on one worker (its module fixtures, servers and demo builds among them,
-    made once), and the browser tests (tests/e2e/) in two groups, each whole on one worker:
-    those on the demo scene (one demo build and server) and the others (one box scene). Each
-    group shares one Chromium. They are collected last, so each starts when a worker is free
-    of the other modules (pytest_collection_modifyitems), and the two run side by side.
+    made once), and the browser tests (tests/e2e/) all together on one worker: they share one
+    Chromium, one demo and one box scene (tests/e2e/shared.py). Split in two groups on the
+    two workers they took 1 480 worker-seconds instead of about 600 alone (two SwiftShaders
+    on two cores), and the run was no shorter. They are collected first
+    (pytest_collection_modifyitems), so one worker starts with them.
     (xdist's own ``--dist loadgroup`` marks do not reach it under pytest 9.2: the group is
     written into a node id that pytest no longer reads.)"""
     from xdist.scheduler import LoadScopeScheduling
@@ -68,8 +86,6 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     class ModulesWithTheBrowserTestsTogether(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             module = nodeid.split("::", 1)[0]
-            if not module.startswith("tests/e2e/"):
-                return module
-            return "tests/e2e/ (demo)" if module.endswith(DEMO_BROWSER_MODULES) else "tests/e2e/"
+            return "tests/e2e/" if module.startswith("tests/e2e/") else module
 
     return ModulesWithTheBrowserTestsTogether(config, log)
