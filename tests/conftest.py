@@ -53,7 +53,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 #: Whether this process has chosen its priority (pytest_runtest_setup).
 _PRIORITY_SET = False
 #: The nice value of the worker that does not run the browser tests.
-OTHER_WORKER_NICE = 10
+OTHER_WORKER_NICE = 19
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:

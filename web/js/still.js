@@ -70,7 +70,13 @@ export class Still {
       this.lastFull = this.drawingFull ? viewOf(viewer) : null;
       const globe = scene.globe;
       this.globeCalm = !globe || !globe.show || globe.tilesLoaded ? this.globeCalm + 1 : 0;
+      if (this.renderer.framesOfAll !== this.framesOfAllSeen) {
+        this.framesOfAllSeen = this.renderer.framesOfAll;
+        this.drawnAt = viewOf(viewer);
+      }
     });
+    this.framesOfAllSeen = 0;
+    this.drawnAt = null; // the view of the last frame that drew every splat
     this.globeCalm = 0; // frames in a row that found the globe's tiles all loaded
     // every animation tick, drawn or not: the still goes when it is no longer the view
     scene.postUpdate.addEventListener(() => {
@@ -84,20 +90,24 @@ export class Still {
     renderer.waitFor(() => this.releasing !== null);
   }
 
-  /** In a software renderer, a view of a large scene (GLOBE_WAIT_SPLATS) whose globe has tiles
-   *  to load (the camera moved, the page opened): the splats wait for them as after a still
-   *  (release), at most GLOBE_WAIT_MS once per view. Each tile loaded asks Cesium for a frame,
-   *  and each frame of every splat costs seconds there: a camera move took 4 to 9 such frames
-   *  (25-40 s for the demo at 1280 x 720), and now takes the globe's frames (next to nothing)
-   *  and one of the splats. On a GPU the wait would make the splats blink: none there. */
+  /** In a software renderer, a new view of a large scene (GLOBE_WAIT_SPLATS; the camera
+   *  moved, the page opened): its splats wait until the globe has loaded its tiles for it, as
+   *  after a still (release: two frames in a row with the tiles loaded, at most GLOBE_WAIT_MS),
+   *  once per view and never for a view already drawn with every splat (they would vanish
+   *  from it). Each tile loaded asks Cesium for a frame, and each frame of every splat costs
+   *  seconds there: a camera move took 4 to 9 such frames (25-40 s for the demo at
+   *  1280 x 720), and now takes the globe's frames (next to nothing) and one of the splats.
+   *  On a GPU the wait would make the splats blink: none there. */
   waitForGlobe() {
     if (!this.software || this.view || this.keepers || hiddenBy) return;
     const globe = this.viewer.scene.globe;
-    if (!globe || !globe.show || globe.tilesLoaded) return;
+    if (!globe || !globe.show) return;
     const t = this.tileset();
+    // (CesiumJS 1.145's private splat count, as render.js reads it)
     if (!t || !t.gaussianSplatPrimitive || !(t.gaussianSplatPrimitive._numSplats >= GLOBE_WAIT_SPLATS)) return;
     const now = viewOf(this.viewer);
-    if (!now || sameView(this.heldAt, now) || splatsHeld(t) || !splatsHoldable(t)) return;
+    if (!now || sameView(this.heldAt, now) || sameView(this.drawnAt, now)) return;
+    if (splatsHeld(t) || !splatsHoldable(t)) return;
     this.heldAt = now;
     this.releasing = { hold: holdSplats(t), since: performance.now() };
     this.globeCalm = 0;
