@@ -112,7 +112,6 @@ class ListingSpace:
 
     anchor: str
     heights_pt: list[float]
-    texts: list[str]
     caption: str = ""
     kind: str = "listing_space"
 

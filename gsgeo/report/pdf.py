@@ -72,7 +72,7 @@ def _spaced(report: Report) -> tuple[Report, dict[str, str]]:
                 lines = [f"{block.header}\n{text}" for text in block.blocks]
                 texts |= {f"{anchor}-{k}": t for k, t in enumerate(lines)}
                 block = ListingSpace(anchor, [(t.count("\n") + 1) * line_pt for t in lines],
-                                     lines, block.caption)
+                                     block.caption)
             blocks.append(block)
         sections.append(dataclasses.replace(section, blocks=blocks))
     return dataclasses.replace(report, sections=sections), texts
