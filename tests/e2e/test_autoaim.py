@@ -145,6 +145,19 @@ WINDOW_JS = """(target) => { const C = Cesium, v = gsgeo.viewer;
 }"""
 
 
+#: What a failure needs to tell why the view shows no splats: the camera, the frames, the
+#: splats' hold, draw command and sort (CesiumJS 1.145's private state, as render.js reads it).
+VIEW_STATE_JS = """() => { const v = gsgeo.viewer, t = gsgeo.state.tileset, p = t && t.gaussianSplatPrimitive;
+  const c = v.camera;
+  return {camera: [c.positionWC.x, c.positionWC.y, c.positionWC.z, c.directionWC.x, c.directionWC.y, c.directionWC.z],
+          frames: gsgeo.renderer.frames, framesOfAll: gsgeo.renderer.framesOfAll,
+          settled: gsgeo.renderer.settled(), still: gsgeo.still.shown() !== null,
+          releasing: gsgeo.still.releasing !== null, show: !!(t && t.show), tilesLoaded: !!(t && t.tilesLoaded),
+          numSplats: p ? p._numSplats : null, selected: t ? t.statistics.numberOfPointsSelected : null,
+          instanceCount: p && p._drawCommand ? p._drawCommand.instanceCount : null,
+          sorter: p ? p._sorterState : null, globeShown: v.scene.globe.show}; }"""
+
+
 def station(page, lead: place.TruthPoint, ids: list[str]) -> list[dict]:
     """Take the station of marker `lead`, wait until its view is drawn, and measure markers
     `ids` from it by auto-aim; checks that no frame of every splat is drawn meanwhile and that
@@ -168,7 +181,7 @@ def station(page, lead: place.TruthPoint, ids: list[str]) -> list[dict]:
     x, y = aims[ids[0]]["win"]
     box = [int(x) - 40, int(y) - 40, 80, 80]
     before = page.evaluate(PIXELS_JS, ["scene", box])
-    assert len(set(before)) > 20  # the scene is drawn there (not a flat background)
+    assert len(set(before)) > 20, (lead.id, page.evaluate(VIEW_STATE_JS), aims)  # the scene is drawn there
     full = page.evaluate("gsgeo.renderer.framesOfAll")
     out = []
     print(f"station {lead.id}: drawn {time.perf_counter() - t0:.1f} s after the camera was set")

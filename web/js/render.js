@@ -36,10 +36,14 @@ export function splatsBusy(t) {
   return p._numSplats > 0 && (!p._drawCommand || p._drawCommand.instanceCount === 0);
 }
 
-/** Whether the frame just drawn drew every splat of tileset `t` (not held, not muted). */
-function drawsAll(t) {
+/** The splat draw command a frame about to be drawn will draw in full for tileset `t`, or
+ *  null (none, muted, or the splats held). CesiumJS 1.145's primitive update pushes the
+ *  command it has and only then builds the next one from a finished sort, so the command of
+ *  a frame is the one there before it. */
+function fullCommand(t) {
   const p = t && t.show && t.gaussianSplatPrimitive;
-  return !!p && !holds.has(p) && !!p._drawCommand && p._drawCommand.instanceCount > 0;
+  if (!p || holds.has(p) || !p._drawCommand || !(p._drawCommand.instanceCount > 0)) return null;
+  return p._drawCommand;
 }
 
 /** CesiumJS asks for a frame after the next one whenever a web worker finishes a task (the
@@ -63,7 +67,7 @@ function dropSortCompletionFrames(scene, tileset) {
 }
 
 /** Whether a sort of tileset `t`'s splats is under way or waits to be committed. */
-function sortPending(t) {
+export function sortPending(t) {
   const p = t && t.show && t.gaussianSplatPrimitive;
   return !!p && !holds.has(p) && ((p._sorterState !== undefined && p._sorterState !== SORT_IDLE) || !!p._sorterPromise);
 }
@@ -138,9 +142,14 @@ export class RenderOnDemand {
     scene.maximumRenderTimeChange = Number.POSITIVE_INFINITY;
     this.moving = false;
     dropSortCompletionFrames(scene, () => this.tileset());
+    let command = null; // the command the frame being drawn draws in full (fullCommand)
+    scene.preRender.addEventListener(() => { command = fullCommand(this.tileset()); });
     scene.postRender.addEventListener(() => {
       this.frames++;
-      if (drawsAll(this.tileset())) this.framesOfAll++;
+      // (not when the splats were held during the frame, nor muted: then it was no frame of
+      // every splat, although Cesium may have built a full command meanwhile)
+      if (command && command.instanceCount > 0 && !splatsHeld(this.tileset())) this.framesOfAll++;
+      command = null;
     });
     viewer.camera.moveStart.addEventListener(() => { this.moving = true; });
     viewer.camera.moveEnd.addEventListener(() => { this.moving = false; });

@@ -9,7 +9,7 @@
 // costs next to nothing. It goes as soon as it is no longer the view: the camera moved (when
 // no auto-aim keeps it), the canvas was resized, or the scene or its georeference changed.
 
-import { holdSplats, splatsHeld, splatsHoldable } from "./render.js";
+import { holdSplats, sortPending, splatsHeld, splatsHoldable } from "./render.js";
 import { sameView, viewOf } from "./overlay.js";
 
 /** How long (ms) the splats may wait for the globe's tiles after the still goes. */
@@ -107,7 +107,9 @@ export class Still {
     if (!t || !t.gaussianSplatPrimitive || !(t.gaussianSplatPrimitive._numSplats >= GLOBE_WAIT_SPLATS)) return;
     const now = viewOf(this.viewer);
     if (!now || sameView(this.heldAt, now) || sameView(this.drawnAt, now)) return;
-    if (splatsHeld(t) || !splatsHoldable(t)) return;
+    // (nor while a sort for the view is under way: held, its result would wait, and Cesium
+    // would build it in the middle of the frame after the release, a frame without splats)
+    if (splatsHeld(t) || !splatsHoldable(t) || sortPending(t)) return;
     this.heldAt = now;
     this.releasing = { hold: holdSplats(t), since: performance.now() };
     this.globeCalm = 0;
@@ -188,6 +190,8 @@ export class Still {
       return;
     }
     this.releasing = null;
+    // (the view's splats have waited for the globe: not again for the same view)
+    this.heldAt = viewOf(this.viewer);
     r.hold.release(this.viewer.camera);
     this.renderer.request();
   }
