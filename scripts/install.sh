@@ -60,6 +60,11 @@ if [ "$test_deps" = 1 ]; then
     [ -f /usr/share/postgresql/15/extension/postgis.control ] || missing+=(postgresql-15-postgis-3)
     # nginx as the static host of scene tiles (tests/e2e/test_static_scenes.py).
     [ -x /usr/sbin/nginx ] || missing+=(nginx-light)
+    # Mesa's llvmpipe through EGL: the software renderer the browser tests draw with
+    # (tests/e2e/workplace.py: about twice as fast as Chromium's SwiftShader here).
+    for pkg in libegl1 libegl-mesa0 libgl1-mesa-dri; do
+        dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || missing+=("$pkg")
+    done
     if [ "${#missing[@]}" -gt 0 ]; then apt_install "${missing[@]}"; fi
     # Debian's QGIS Python and its providers (OAPIF) for the QGIS plugin's headless test;
     # where apt has no QGIS, that test skips and says why.

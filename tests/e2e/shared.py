@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.e2e.workplace import CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, REPO, make_data_dir
+from tests.e2e.workplace import CESIUM_JS, CHROMIUM, CHROMIUM_ARGS, GL, REPO, make_data_dir
 
 
 def require_browser() -> None:
@@ -32,14 +32,31 @@ def require_browser() -> None:
 
 @pytest.fixture(scope="session")
 def browser() -> Iterator:
-    """Headless Chromium (SwiftShader) for the whole session; tests open and close pages."""
+    """Headless Chromium for the whole session, drawing with the software renderer GL
+    (workplace.py); tests open and close pages."""
     require_browser()
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
         b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        renderer = webgl_renderer(b)
+        if GL not in renderer.lower():
+            b.close()
+            pytest.fail(f"Chromium draws with {renderer!r}, not {GL} (GSGEO_TEST_GL): for llvmpipe, "
+                        "Debian's libegl-mesa0 and libgl1-mesa-dri (scripts/install.sh --test)")
         yield b
         b.close()
+
+
+def webgl_renderer(browser) -> str:
+    """The WebGL 2 renderer string of a page of `browser` (unmasked)."""
+    page = browser.new_page()
+    try:
+        return page.evaluate("""() => { const g = document.createElement('canvas').getContext('webgl2');
+            if (!g) return 'no WebGL 2'; const e = g.getExtension('WEBGL_debug_renderer_info');
+            return String(e ? g.getParameter(e.UNMASKED_RENDERER_WEBGL) : g.getParameter(g.RENDERER)); }""")
+    finally:
+        page.close()
 
 
 def serve(data: Path, *extra: str, env: dict | None = None) -> Iterator[str]:

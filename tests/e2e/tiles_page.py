@@ -15,10 +15,6 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 CESIUM_BUILD = REPO / "web" / "node_modules" / "cesium" / "Build" / "Cesium"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader",
-                 "--enable-unsafe-swiftshader", "--disable-background-networking",
-                 "--disable-component-update", "--no-first-run"]
 
 #: JavaScript predicate on a Cesium3DTileset: its Gaussian splat primitive holds one snapshot
 #: of every selected splat, sorted and ready to draw. CesiumJS 1.145 (pinned) has no public
