@@ -1,4 +1,6 @@
-"""Auto-aim in the viewer (key A), end to end in headless Chromium (SwiftShader) on the demo scene:
+"""Auto-aim in the viewer (key A), end to end in headless Chromium on the demo scene (drawing with
+the software renderer the browser tests use: Mesa's llvmpipe, or SwiftShader with
+GSGEO_TEST_GL=swiftshader, as in the figures before 2026-11-28 15:00 UTC in benchmarks/README.md):
 the time from A to the auto rays and where it goes, and the operator's clicks per point with
 the 3-D error of each method (the accuracy experiment's "auto" row).
 

@@ -17,9 +17,9 @@ from collections import defaultdict
 
 #: (cause, regular expression on the test file's path), first match wins.
 CAUSES = [
-    ("browser frames (SwiftShader): the demo's 341 816 splats",
+    ("browser frames (software renderer): the demo's 341 816 splats",
      r"e2e/test_(autoaim|building_tool|guide)\.py"),
-    ("browser frames (SwiftShader): box, real and static scenes", r"e2e/|test_qgis_plugin\.py"),
+    ("browser frames (software renderer): box, real and static scenes", r"e2e/|test_qgis_plugin\.py"),
     ("demo builds (341 816 splats sampled, tiled)", r"test_demo_"),
     ("PostgreSQL cluster and its API twins",
      r"postgres|test_store\.py|test_accounts\.py|test_audit|test_ray_provenance\.py|test_postgis"),

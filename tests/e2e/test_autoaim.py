@@ -148,11 +148,12 @@ WINDOW_JS = """(target) => { const C = Cesium, v = gsgeo.viewer;
 #: What a failure needs to tell why the view shows no splats: the camera, the frames, the
 #: splats' hold, draw command and sort (CesiumJS 1.145's private state, as render.js reads it).
 VIEW_STATE_JS = """() => { const v = gsgeo.viewer, t = gsgeo.state.tileset, p = t && t.gaussianSplatPrimitive;
-  const c = v.camera;
-  return {camera: [c.positionWC.x, c.positionWC.y, c.positionWC.z, c.directionWC.x, c.directionWC.y, c.directionWC.z],
+  const c = v.camera, o = c.positionWC, d = c.directionWC;
+  return {camera: [o.x, o.y, o.z, d.x, d.y, d.z],
           frames: gsgeo.renderer.frames, framesOfAll: gsgeo.renderer.framesOfAll,
           settled: gsgeo.renderer.settled(), still: gsgeo.still.shown() !== null,
-          releasing: gsgeo.still.releasing !== null, show: !!(t && t.show), tilesLoaded: !!(t && t.tilesLoaded),
+          releasing: gsgeo.still.releasing !== null, show: !!(t && t.show),
+          tilesLoaded: !!(t && t.tilesLoaded),
           numSplats: p ? p._numSplats : null, selected: t ? t.statistics.numberOfPointsSelected : null,
           instanceCount: p && p._drawCommand ? p._drawCommand.instanceCount : null,
           sorter: p ? p._sorterState : null, globeShown: v.scene.globe.show}; }"""
