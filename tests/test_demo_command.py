@@ -137,6 +137,33 @@ def test_busy_port_is_reported_before_building(tmp_path):
     assert not (tmp_path / "d").exists()   # nothing built
 
 
+def test_the_port_of_a_server_stopped_a_moment_ago_is_free_at_once():
+    """After Ctrl-C the server's closed connections sit in TIME_WAIT on its port for a minute;
+    `gsgeo demo` on that port again must start (uvicorn binds it with SO_REUSEADDR), while a
+    server still listening there is refused."""
+    import socket
+
+    from gsgeo.commands.demo import check_port_free
+    from gsgeo.errors import InputError
+
+    server = socket.socket()
+    server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    port = server.getsockname()[1]
+    client = socket.create_connection(("127.0.0.1", port))
+    conn, _ = server.accept()
+    conn.close()  # the server closes first: its side of the connection goes to TIME_WAIT
+    client.recv(1)
+    client.close()
+    with pytest.raises(InputError, match=f"127.0.0.1:{port}"):
+        check_port_free("127.0.0.1", port)  # still listening
+    server.close()
+    with socket.socket() as plain, pytest.raises(OSError):
+        plain.bind(("127.0.0.1", port))  # the TIME_WAIT that made the old check refuse
+    check_port_free("127.0.0.1", port)
+
+
 def test_demo_off_loopback_prints_the_address_with_its_token(data):
     """Bound off loopback the API needs a token: the address the demo prints carries the very
     token the server uses, so opening it works (a bare address would get 401 everywhere)."""

@@ -56,14 +56,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def _check_port_free(host: str, port: int) -> None:
-    """Fail before the build, with a message, when the port is taken (port 0: any free one)."""
+def check_port_free(host: str, port: int) -> None:
+    """Raise InputError naming the port when a server listens on `host`:`port` (port 0: any
+    free one). The port of a server stopped a moment ago is free: its closed connections
+    (TIME_WAIT) do not count, as they do not for the server that binds it next (uvicorn sets
+    SO_REUSEADDR)."""
     import socket
 
     if port == 0:
         return
     try:
         with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             s.bind((host, port))
     except OSError as exc:
         raise InputError(f"cannot serve on {host}:{port} ({exc.strerror}); another server "
@@ -123,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port must be between 0 and 65535, got {args.port}")
     if not args.no_serve:
-        _check_port_free(args.host, args.port)
+        check_port_free(args.host, args.port)
     data = Path(args.data)
     local = bool(args.local)
     scene_name, pid = (_build_local if local else _build)(data, args.rebuild)
