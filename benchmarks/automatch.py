@@ -11,7 +11,8 @@ auto-aim (web/js/autoaim.js: M, one real click on the marker's exact projection 
 degrees up at 12 m, A) in headless Debian chromium; the bodies of its POST /api/match requests
 (reference crop, target crops, cameras, the depth hint) and the /depth, /views answers are
 saved as <dataset>/<marker>.json with the truth in rendered ECEF (the tileset's modelMatrix
-applied to gsgeo.demo.place.truth_points()). Slow: every view is rendered by SwiftShader.
+applied to gsgeo.demo.place.truth_points()). Slow: every view is rendered by a software
+renderer (the browser tests' GSGEO_TEST_GL).
 
 evaluate: gsgeo.aim.match.match_feature on every (reference, target) pair, as the server
 would run it (with /depth's normal_ecef when --normal); per pair whether it was accepted, the

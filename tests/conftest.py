@@ -59,10 +59,10 @@ OTHER_WORKER_NICE = 19
 def pytest_runtest_setup(item: pytest.Item) -> None:
     """On two workers, the one that starts with something other than the browser tests (which
     come first) runs at nice OTHER_WORKER_NICE for the rest of the session, its servers and
-    PostgreSQL too. SwiftShader draws every frame on both cores with threads that wait by
-    spinning: beside a busy worker of equal priority the browser tests took 2-4 times their
-    time alone (the building tool 270 s instead of 70 s), more than the other worker gained.
-    At a lower priority the other worker takes the cores the browser leaves idle."""
+    PostgreSQL too. The software renderer draws every frame on both cores: beside a busy
+    worker of equal priority the browser tests took 2-4 times their time alone (SwiftShader:
+    the building tool 270 s instead of 70 s), more than the other worker gained. At a lower
+    priority the other worker takes the cores the browser leaves idle."""
     global _PRIORITY_SET
     if _PRIORITY_SET:
         return
@@ -77,7 +77,7 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     made once), and the browser tests (tests/e2e/) all together on one worker: they share one
     Chromium, one demo and one box scene (tests/e2e/shared.py). Split in two groups on the
     two workers they took 1 480 worker-seconds instead of about 600 alone (two SwiftShaders
-    on two cores), and the run was no shorter. They are collected first
+    on two cores, the renderer then), and the run was no shorter. They are collected first
     (pytest_collection_modifyitems), so one worker starts with them.
     (xdist's own ``--dist loadgroup`` marks do not reach it under pytest 9.2: the group is
     written into a node id that pytest no longer reads.)"""
