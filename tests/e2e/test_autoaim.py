@@ -173,8 +173,10 @@ def station(page, lead: place.TruthPoint, ids: list[str]) -> list[dict]:
     page.wait_for_function(f"gsgeo.still.shown() === null && gsgeo.renderer.framesOfAll > {f0}"
                            " && gsgeo.renderer.settled() && gsgeo.viewer.scene.globe.tilesLoaded",
                            timeout=180_000, polling=200)
-    page.wait_for_function("gsgeo.renderer.settled() && gsgeo.viewer.scene.globe.tilesLoaded",
-                           timeout=180_000, polling=200)
+    # (and its last frame one of the whole scene, as the operator sees it: the still can be
+    # taken, so the click and A draw no frame of every splat)
+    page.wait_for_function("gsgeo.renderer.settled() && gsgeo.viewer.scene.globe.tilesLoaded"
+                           " && gsgeo.still.ready()", timeout=180_000, polling=200)
     w, h = aims[ids[0]]["canvas"]
     for pid, a in aims.items():
         assert a["dist"] < 1e-5, a  # the projection and Cesium's pick ray agree

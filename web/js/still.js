@@ -82,8 +82,9 @@ export class Still {
     scene.postUpdate.addEventListener(() => {
       if (this.view && !this.keepers && !this.valid()) this.drop();
       else if (this.releasing) this.release(false);
-      else this.waitForGlobe();
+      else { this.waitForGlobe(); this.completeView(); }
     });
+    this.completedAt = null; // the view for which completeView last asked a frame
     this.software = false; // set by the page: a software renderer (render.js's isSoftwareRenderer)
     this.releasing = null; // {hold, since}: the splats given back once the globe is drawn
     this.heldAt = null; // the view for which the splats last waited for the globe
@@ -114,6 +115,26 @@ export class Still {
     this.releasing = { hold: holdSplats(t), since: performance.now() };
     this.globeCalm = 0;
     this.viewer.scene.requestRender();
+  }
+
+  /** Once the view has settled, when its last frame was not one of the whole scene (drawn
+   *  while a sort was committed, say), ask for one frame more, once per view: so the still
+   *  can be taken when the operator clicks (ready()), instead of a frame of every splat being
+   *  drawn after the click's reference is read. */
+  completeView() {
+    if (this.view || this.keepers || hiddenBy) return;
+    const now = viewOf(this.viewer);
+    if (!now || sameView(this.lastFull, now) || sameView(this.completedAt, now)) return;
+    if (!this.renderer.settled() || splatsHeld(this.tileset())) return;
+    this.completedAt = now;
+    this.viewer.scene.requestRender();
+  }
+
+  /** Whether a still of the view could be taken now (take()): its last frame drew the whole
+   *  scene, settled, at the present camera. */
+  ready() {
+    const now = viewOf(this.viewer);
+    return !!now && !this.releasing && sameView(this.lastFull, now) && this.renderer.settled();
   }
 
   /** The view the still shows, or null when there is none (for the overlay). */
