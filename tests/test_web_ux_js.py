@@ -17,9 +17,10 @@ pytestmark = pytest.mark.skipif(shutil.which("node") is None, reason="Node.js is
 
 
 def run_js(body: str, data) -> object:
-    """Run `body` with pointid.js as I, quality.js as Q, format.js as F and `data` bound; it
-    prints one JSON value."""
+    """Run `body` with pointid.js as I, quality.js as Q, format.js as F, autoaimtext.js as T
+    and `data` bound; it prints one JSON value."""
     src = (f"import * as I from '{(WEB_JS / 'pointid.js').as_uri()}';\n"
+           f"import * as T from '{(WEB_JS / 'autoaimtext.js').as_uri()}';\n"
            f"import * as Q from '{(WEB_JS / 'quality.js').as_uri()}';\n"
            f"import * as F from '{(WEB_JS / 'format.js').as_uri()}';\n"
            f"const data = {json.dumps(data)};\n{body}\n")
@@ -84,3 +85,22 @@ def test_warnings_every_point_shares_are_the_projects():
                  "F.sharedWarnings(data.slice(1))]));", pts)
     # one point alone: its warnings stay its own
     assert got == [[datum], []]
+
+
+def test_auto_aim_and_enter_say_what_happened_and_what_to_do_next():
+    """An auto-aim that matched no view does not offer Enter (one ray cannot be stored) but
+    says to click another view; one that did says how many rays it added; the reasons stay in
+    the panel, so the status line stays short; Enter with one ray says why nothing was
+    stored."""
+    t = run_js("""console.log(JSON.stringify({none: T.autoAimSummary(0, 4, 4),
+        some: T.autoAimSummary(3, 4, 1), all: T.autoAimSummary(4, 4, 0),
+        whole: T.autoAimDeclined('ray 1 hits no splat (sky?).'),
+        one: T.tooFewRays('P3', 1), zero: T.tooFewRays('P3', 0)}));""", None)
+    assert "Enter" not in t["none"] and "another view" in t["none"] and "none of the 4 views" in t["none"]
+    assert t["some"].startswith("Auto-aim added 3 rays of 4 views; 1 declined")
+    assert "Enter stores" in t["some"]
+    assert "declined" not in t["all"] and "4 rays" in t["all"]
+    assert t["whole"].startswith("Auto-aim declined: ray 1 hits no splat (sky?). Click it yourself")
+    assert t["one"].startswith("Nothing stored: P3 has 1 ray and a point needs 2 or more.")
+    assert "another view" in t["one"] and "add ray 1" in t["zero"]
+    assert max(len(x) for x in t.values()) < 130, t

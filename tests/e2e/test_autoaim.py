@@ -109,14 +109,23 @@ def error_of(point: dict, t: place.TruthPoint) -> float:
 
 def check_report(rep: dict) -> None:
     """Every auto ray shows its thumbnail and score; every declined view is named with its
-    reason in the panel and the status line; the four views are all accounted for."""
+    reason in the panel; the status line says briefly how many rays were added and how many
+    views declined, and what to do next; the four views are all accounted for."""
     assert rep["thumbs"] == sum(1 for ray in rep["rays"] if ray["auto"]), rep
     assert all(ray["score"] is not None for ray in rep["rays"] if ray["auto"]), rep
     whole = rep["text"].startswith("Auto-aim declined")  # before any view: ray 1 itself
     assert len(rep["declined"]) + rep["added"] == 4 or whole, rep
     for reason in rep["declined"]:
         assert reason.startswith("view ") and ": " in reason, reason
-        assert reason in rep["panel"] and reason in rep["status"], rep
+        assert reason in rep["panel"] and reason not in rep["text"], rep
+    if not whole and rep["added"]:
+        declined = f"; {len(rep['declined'])} declined" if rep["declined"] else ""
+        assert rep["text"] == (f"Auto-aim added {rep['added']} ray{'s' if rep['added'] > 1 else ''} of 4 "
+                               f"views{declined}{' (why: in the panel)' if declined else ''}. "
+                               "Review them, then Enter stores the point."), rep
+    elif not whole:
+        assert "none of the 4 views" in rep["text"] and "another view" in rep["text"], rep
+    assert rep["status"].startswith(rep["text"]), rep
 
 
 #: The scene canvas (WebGL, its drawing buffer kept) or the still over it, as RGBA bytes of a

@@ -299,6 +299,11 @@ def test_backspace_and_escape(server, browser, project):
         p.wait_rays(1)
         p.page.wait_for_function(
             "() => /at least 2 rays/.test(document.querySelector('#live-solution').textContent)")
+        # Enter with one ray stores nothing and says why
+        p.page.keyboard.press("Enter")
+        p.page.wait_for_function("() => /Nothing stored: P\\d+ has 1 ray/"
+                                 ".test(document.querySelector('#messages').textContent)")
+        assert p.page.locator("#id-prompt").is_hidden()
         p.shot("05_after_backspace", settle_ms=500)
         p.page.keyboard.press("Escape")
         p.page.wait_for_selector("#measure-panel", state="hidden")

@@ -19,6 +19,7 @@
 // position of its top-left corner.
 
 import { api } from "./api.js";
+import { autoAimDeclined, autoAimSummary } from "./autoaimtext.js";
 import { fixed, h } from "./format.js";
 import { currentCamera, project, requestDepth } from "./guide.js";
 import { add, norm, scale } from "./linalg.js";
@@ -431,11 +432,10 @@ export async function autoAim(ctx, changed = () => {}) {
     m.rays.push(...added);
     timings.rays = at();
     result.added = added.length;
-    const why = declined.map((x) => x.reason).join("; ");
-    result.text = `Auto-aim: ${added.length} of ${views.length} views matched${declined.length ? `; declined ${why}` : ""}. Review the auto rays, then Enter stores the point.`;
+    result.text = autoAimSummary(added.length, views.length, declined.length);
     ctx.message(result.text, added.length === 0);
   } catch (exc) {
-    result.text = `Auto-aim declined: ${exc.message || exc}`;
+    result.text = autoAimDeclined(exc.message || exc);
     ctx.message(result.text, true);
   } finally {
     result.running = false;

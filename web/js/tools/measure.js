@@ -15,6 +15,7 @@ import { nextPointId } from "../pointid.js";
 import { closeIdPrompt, idError, idPromptOpen, openIdPrompt, promptedId } from "../idprompt.js";
 import { hitsNothing, refresh as refreshGuide, requestDepth } from "../guide.js";
 import { autoAim, autoAimPanel, autoAimResult, rayBadge, rememberReference } from "../autoaim.js";
+import { tooFewRays } from "../autoaimtext.js";
 
 /** What to say about ray i (0-based) of `m` that hits no splat: how to get rid of it. */
 function noHitText(m, i) {
@@ -235,7 +236,7 @@ const measure = {
     const { state } = ctx;
     const m = state.measure;
     if (!state.project) { ctx.message("Create or open a project first (top bar), then press Enter again.", true); return; }
-    if (m.rays.length < 2) { ctx.message(`A point needs at least 2 rays; ${m.pointId} has ${m.rays.length}.`, true); return; }
+    if (m.rays.length < 2) { ctx.message(tooFewRays(m.editing || m.pointId, m.rays.length), true); return; }
     if (!m.editing && !idPromptOpen()) { openIdPrompt(ctx); return; }
     const typedId = m.editing ? "" : promptedId();
     if (typedId && state.points.some((p) => p.id === typedId)) {
