@@ -26,7 +26,7 @@ from tests.e2e.workplace import (
 
 pytestmark = pytest.mark.e2e
 
-VIEWPORT = {"width": 960, "height": 540}
+VIEWPORT = {"width": 1280, "height": 720}
 PID = "ux"
 TO_GEO = pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
 #: Animation ticks and rendered frames of the page with requestRenderMode `mode`, over 8 ticks
