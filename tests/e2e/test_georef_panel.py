@@ -30,7 +30,7 @@ from tests.e2e.workplace import AIM_JS
 
 pytestmark = pytest.mark.e2e
 
-VIEWPORT = {"width": 960, "height": 540}
+VIEWPORT = {"width": 1280, "height": 720}
 TO_ECEF = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
 TO_GEO = pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
 SCENE = "box"

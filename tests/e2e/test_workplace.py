@@ -31,7 +31,7 @@ from tests.e2e.workplace import (
 
 pytestmark = pytest.mark.e2e
 
-VIEWPORT = {"width": 960, "height": 540}
+VIEWPORT = {"width": 1280, "height": 720}
 GRID = "EPSG:32630"  # WGS 84 / UTM zone 30N: a pure conversion from WGS 84, exact in pyproj
 TO_GRID = pyproj.Transformer.from_crs("EPSG:4979", GRID, always_xy=True)
 TO_GEO = pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
