@@ -153,7 +153,7 @@ export class Still {
     if (this.view) return true;
     const t = this.tileset();
     const now = viewOf(this.viewer);
-    if (!now || this.releasing || !sameView(this.lastFull, now) || !this.renderer.settled() || !splatsHoldable(t)) return false;
+    if (!this.ready() || !splatsHoldable(t)) return false;
     const src = this.viewer.scene.canvas;
     this.canvas.width = src.width;
     this.canvas.height = src.height;
