@@ -118,6 +118,24 @@ function setCamera(viewer, camera) {
     orientation: { direction: c3(camera.direction), up: c3(camera.up) } });
 }
 
+/** The viewer camera's pose now, to tell later whether something else moved it. */
+function poseOf(viewer) {
+  const c = viewer.camera;
+  return { position: Cesium.Cartesian3.clone(c.positionWC), direction: Cesium.Cartesian3.clone(c.directionWC) };
+}
+
+/** Whether the camera left `pose` (more than 1 mm, or turned more than 1 microradian): the
+ *  operator moved it while a capture waited for its frame. */
+function movedFrom(viewer, pose) {
+  const c = viewer.camera;
+  return Cesium.Cartesian3.distance(c.positionWC, pose.position) > 1e-3
+    || Cesium.Cartesian3.distance(c.directionWC, pose.direction) > 1e-6;
+}
+
+/** A capture's error when the operator moved the camera before its frame was drawn: the
+ *  capture gives up rather than put the camera back (a reference is taken again on A). */
+const MOVED = "the camera was moved before the view was drawn";
+
 /** Render at `camera` until a frame shows the splats sorted and drawn for it, without the
  *  globe and the sky (the measuring graphics are on the overlay, not in the frame), and return
  *  the crops `boxes()` gives of that frame (canvases) and the number of frames it took. The
@@ -136,6 +154,7 @@ function captureAt(ctx, camera, boxes) {
   const { viewer } = ctx;
   const scene = viewer.scene;
   setCamera(viewer, camera);
+  const pose = poseOf(viewer);
   const restore = hideScenery(scene);
   const t = ctx.state.tileset;
   const p = t && t.gaussianSplatPrimitive;
@@ -162,6 +181,7 @@ function captureAt(ctx, camera, boxes) {
     // and draws it from the next)
     const onPre = () => {
       const tt = ctx.state.tileset;
+      if (movedFrom(viewer, pose)) { done(() => reject(new Error(MOVED))); return; }
       if (splatsHoldable(tt)) {
         // the splats became drawable by parts (their first snapshot is in): this frame
         // draws only those of the crops instead
@@ -174,6 +194,7 @@ function captureAt(ctx, camera, boxes) {
     const onPost = () => {
       frames++;
       const tt = ctx.state.tileset;
+      if (movedFrom(viewer, pose)) { done(() => reject(new Error(MOVED))); return; }
       if (ready && sortedFor(tt, viewer.camera)) {
         let crops;
         try { crops = boxes().map((b) => cropOf(scene.canvas, b)); } catch (exc) { done(() => reject(exc)); return; }
@@ -197,6 +218,7 @@ function captureHeld(ctx, hold, camera, boxes) {
   const { viewer } = ctx;
   const scene = viewer.scene;
   setCamera(viewer, camera);
+  const pose = poseOf(viewer);
   const restore = hideScenery(scene);
   const canvas = scene.canvas;
   let splats = 0;
@@ -224,6 +246,7 @@ function captureHeld(ctx, hold, camera, boxes) {
     };
     const onPost = () => {
       frames++;
+      if (movedFrom(viewer, pose)) { done(() => reject(new Error(MOVED))); return; }
       if (hold.drawnFrame >= 0) {
         let crops;
         try { crops = boxes().map((b) => cropOf(canvas, b)); } catch (exc) { done(() => reject(exc)); return; }
