@@ -48,8 +48,9 @@ class Ray:
     pixel: tuple[float, float] | None = None
     viewport: tuple[float, float] | None = None
     model_matrix: FloatArray | None = None  # 16 numbers, column-major; None = identity
-    # provenance: matched automatically (True) or clicked (False; None: not said, a click),
-    # and the match score (peak NCC, None: none); kept with the ray, not used by the solver
+    # provenance: matched automatically (True; its reference click's aiming error is shared,
+    # gsgeo.solve.sharedaim) or clicked (False; None: not said, a click), and the match score
+    # (peak NCC, None: none; kept with the ray, not used by the solver)
     auto: bool | None = None
     score: float | None = None
 
@@ -99,7 +100,8 @@ class SessionPoint:
                 [r.origin for r in self.rays], [r.direction for r in self.rays],
                 [r.ifov for r in self.rays], [r.pixel for r in self.rays],
                 [r.viewport for r in self.rays],
-                [None if r.model_matrix is None else r.model_matrix for r in self.rays])
+                [None if r.model_matrix is None else r.model_matrix for r in self.rays],
+                [r.auto for r in self.rays])
         return self.typed
 
 

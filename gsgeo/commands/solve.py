@@ -87,7 +87,7 @@ def solve_session(session: Session) -> list[dict]:
         try:
             rays = pt.to_rays()
             res = intersect(rays.origins, rays.directions, ifov=rays.angular_ifov(),
-                            sigma_px=session.sigma_px)
+                            sigma_px=session.sigma_px, auto=rays.auto)
         except GsgeoError as exc:
             entry["error"] = str(exc)
         else:

@@ -56,7 +56,7 @@ from gsgeo.crs.resolve import source_crs as resolve_source
 from gsgeo.crs.transformers import candidates, transformer
 from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.jsontypes import JSONObject
-from gsgeo.measure.point import measure_point, measure_points
+from gsgeo.measure.point import REFERENCE_EXCLUDED, measure_point, measure_points
 from gsgeo.measure.rays import Rays, SolveSettings
 from gsgeo.measure.schema import Measurement, MeasurementFailure, largest, now_utc
 from gsgeo.solve import (
@@ -69,6 +69,12 @@ from gsgeo.solve.core import CoreSolution, solve_core, unit_directions
 from gsgeo.solve.intersection import GLOBAL_TEST_ALPHA
 from gsgeo.solve.linalg import FloatArray, sym2_quadratic_inverse, sym3_inverse
 from gsgeo.solve.outliers import ALPHA, plane_bases
+from gsgeo.solve.sharedaim import (
+    AUTO_UNWEIGHTED,
+    aim_scales,
+    reference_rays,
+    shared_aim_covariance,
+)
 from gsgeo.solve.stats import chi2_2_quantile, chi2_sf, f2_quantile
 
 #: One point to measure: id, code, description, its rays, 0-based indices of excluded rays.
@@ -270,6 +276,9 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
     f = None
     if angular:
         f = np.concatenate([points[i][3].ifov for i in members]).reshape(m, n)
+    autos = [points[i][3].auto for i in members]
+    au = None if all(a is None for a in autos) else np.concatenate(
+        [np.zeros(n, dtype=bool) if a is None else a for a in autos]).reshape(m, n)
     matrices = [points[i][3].model_matrices for i in members]
     o, d, similar, ok = _georeferenced(o, d_r, None if all(x is None for x in matrices) else
                                        np.concatenate([np.full((n, 4, 4), np.nan) if x is None
@@ -291,9 +300,11 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
     max_angle, max_isect = intersection_angles(_kept(du, keep, n_keep))
     ok &= ~(max_isect < PARALLEL_LIMIT_DEG)  # the error and its message: measure_point's
     fallback = idx[~ok].tolist()
+    scales = None if f is None else aim_scales(au, (m, n), s_px)
+    f_w = f if f is None or scales is None else f * scales  # weights: sigma_px x this x range
     if ok.any():
         sol = solve_core(_kept(o_enu[ok], keep[ok], n_keep), _kept(du[ok], keep[ok], n_keep),
-                         None if f is None else _kept(f[ok], keep[ok], n_keep), s_px)
+                         None if f_w is None else _kept(f_w[ok], keep[ok], n_keep), s_px)
         front = np.all(sol.ranges > 0, axis=1)  # behind a camera: measure_point's error
         fallback += idx[ok][~front].tolist()
         rows = np.flatnonzero(ok)[front]
@@ -309,8 +320,10 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
                            sol.vtpv[front], sol.iterations)
     idx, keep, o, d, o_enu, du, origin, rot, similar = (
         a[rows] for a in (idx, keep, o, d, o_enu, du, origin, rot, similar))
+    au = None if au is None else au[rows]
     max_angle, max_isect = max_angle[rows], max_isect[rows]
     f = None if f is None else f[rows]
+    f_w = None if f_w is None else f_w[rows]
     m = rows.size
     dof = 2 * n_keep - 3
     s0sq = sol.vtpv / dof
@@ -323,6 +336,17 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
     ninv = sol.normal_inverse
     res_px_sol = None
     f_keep = None if f is None else _kept(f, keep, n_keep)
+    apriori = ninv
+    if au is not None:
+        au_keep = _kept(au, keep, n_keep)
+        grouped = reference_rays(au_keep)[1]
+        if f_w is None:
+            for k in np.flatnonzero(grouped).tolist():
+                warnings[k].append(AUTO_UNWEIGHTED)
+        elif grouped.any():
+            apriori = shared_aim_covariance(sol.points, _kept(o_enu, keep, n_keep),
+                                            _kept(du, keep, n_keep), _kept(f_w, keep, n_keep),
+                                            s_px, np.ones((m, n_keep), dtype=bool), au_keep, ninv)
     if f_keep is None:
         model = "unweighted"
         cov = ninv * s0sq[:, None, None]
@@ -330,7 +354,7 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
         model = "angular"
         res_px_sol = sol.residuals_m / (f_keep * sol.ranges)
         scaled = _global_test(sol.vtpv, dof)
-        cov = ninv.copy()
+        cov = apriori.copy()
         cov[scaled] *= s0sq[scaled][:, None, None]
         p_all = np.full(m, np.nan)
         if scaled.any():
@@ -353,6 +377,8 @@ def _solve_group(points: Sequence[BatchPoint], members: list[int], keep: np.ndar
     notes: list[list[str]] = [[] for _ in range(m)]  # the Measurement's, after the solution's
     for k in np.flatnonzero(~keep.all(axis=1)).tolist():
         notes[k].append(f"ray(s) {_ray_list(np.logical_not(keep[k]))} excluded by request")
+        if au is not None and au[k].any() and not keep[k, int(np.argmax(~au[k]))]:
+            notes[k].append(REFERENCE_EXCLUDED)
     all_flags = np.zeros((m, n), dtype=bool)
     all_flags[keep] = flags.reshape(-1)
     # residuals of every ray (excluded ones too) from the solved point, as measure_point has

@@ -27,6 +27,11 @@ from gsgeo.measure.rays import Rays, SolveSettings
 from gsgeo.measure.schema import Measurement, MeasurementFailure, now_utc
 from gsgeo.solve import intersect
 
+#: The warning of a point whose auto rays' reference click is excluded.
+REFERENCE_EXCLUDED = ("the clicked ray the auto rays were matched to is excluded; they still "
+                      "share its aiming error, which the covariance no longer holds: click the "
+                      "feature again and auto-aim from that ray")
+
 
 def _provisional(o: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Unweighted least-squares point of rays (ECEF), only to place the ENU origin.
@@ -105,7 +110,8 @@ def measure_point(
     frame = EnuFrame(_provisional(o[keep], d[keep]), src.id)
     o_enu = frame.to_enu(o)
     d_enu = frame.directions_to_enu(d)
-    sol = intersect(o_enu[keep], d_enu[keep], ifov=f_keep, sigma_px=sigma_px)
+    auto = None if rays.auto is None else rays.auto[keep]
+    sol = intersect(o_enu[keep], d_enu[keep], ifov=f_keep, sigma_px=sigma_px, auto=auto)
     point_ecef = frame.to_ecef(sol.point)
     cov_ecef = frame.covariance_to_ecef(sol.covariance)
     warnings += sol.warnings
@@ -122,6 +128,8 @@ def measure_point(
         warnings.append(
             f"ray(s) {', '.join(str(i + 1) for i in np.flatnonzero(mask))} excluded by request"
         )
+        if rays.auto is not None and mask[int(np.argmax(~rays.auto))]:
+            warnings.append(REFERENCE_EXCLUDED)
 
     frame_cov = None if settings.frame is None else settings.frame.point_covariance(point_ecef)
     cov_total = cov_ecef if frame_cov is None else cov_ecef + frame_cov

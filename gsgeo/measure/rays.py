@@ -29,9 +29,18 @@ from gsgeo.solve.linalg import FloatArray
 #: The session-JSON members of a ray, in the order they are written.
 RAY_KEYS = ("origin", "direction", "ifov", "pixel", "viewport", "model_matrix")
 #: Members of a stored ray that say how it was aimed (matched automatically or clicked, the
-#: match score), kept with it and never read by the solver.
+#: match score), kept with it. ``auto`` enters the measurement (Rays.auto: an auto ray shares
+#: its reference click's aiming error, gsgeo.solve.sharedaim); the score is never read.
 RAY_PROVENANCE_KEYS = ("auto", "score")
 _IDENTITY4 = np.eye(4)
+
+
+def _auto_flags(values: ArrayLike | None, n: int) -> np.ndarray | None:
+    """(n,) bool auto flags, None when no ray is auto."""
+    if values is None:
+        return None
+    a = np.array(values, dtype=bool).reshape(n)
+    return a if a.any() else None
 
 
 def _optional_rows(values: Sequence[ArrayLike | None] | np.ndarray | None, n: int,
@@ -59,6 +68,8 @@ class Rays:
         ray has one. pixels, viewports : (N, 2) CSS pixels, NaN rows where absent, or None.
     model_matrices : (N, 4, 4) the tileset's modelMatrix at each click (NaN where the ray
         has none: identity), or None.
+    auto : (N,) bool, True for a ray matched automatically to the point's first clicked ray
+        (auto-aim), or None when every ray was clicked.
 
     Validated on construction; InputError names ``rays[i].<member>``.
     """
@@ -69,6 +80,7 @@ class Rays:
     pixels: FloatArray | None = None
     viewports: FloatArray | None = None
     model_matrices: FloatArray | None = None
+    auto: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         o = np.asarray(self.origins, dtype=np.float64).reshape(-1, 3)
@@ -108,8 +120,9 @@ class Rays:
                                      field=f"{at}.model_matrix")
         if mm is not None and np.all(np.isnan(mm)):
             mm = None
+        auto = _auto_flags(self.auto, n)
         for name, value in (("origins", o), ("directions", d), ("ifov", f), ("pixels", px),
-                            ("viewports", vp), ("model_matrices", mm)):
+                            ("viewports", vp), ("model_matrices", mm), ("auto", auto)):
             if value is not None:
                 value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -135,11 +148,12 @@ class Rays:
     @classmethod
     def split(cls, origins: ArrayLike, directions: ArrayLike, counts: Sequence[int],
               ifov: ArrayLike | None = None, pixels: ArrayLike | None = None,
-              viewports: ArrayLike | None = None) -> list[Rays] | None:
+              viewports: ArrayLike | None = None, auto: ArrayLike | None = None
+              ) -> list[Rays] | None:
         """Many points' rays from stacked arrays: R = sum(counts) rows of origins, directions
-        (R, 3), ifov (R,), pixels, viewports (R, 2), NaN where a ray has no such member; no
-        model matrices. Checked on the whole stack at once; None when any row is out of range
-        (build those points one by one to have the problem named)."""
+        (R, 3), ifov (R,), pixels, viewports (R, 2), NaN where a ray has no such member, auto
+        (R,) bool; no model matrices. Checked on the whole stack at once; None when any row is
+        out of range (build those points one by one to have the problem named)."""
         # copies, made read-only whole: every point's rows are views of them
         o = np.array(origins, dtype=np.float64).reshape(-1, 3)
         d = np.array(directions, dtype=np.float64).reshape(-1, 3)
@@ -153,6 +167,12 @@ class Rays:
                 not cls._plainly_valid(o, d, f, px, vp, None):
             return None
         starts = ends - n
+        au = None if auto is None else np.array(auto, dtype=bool).reshape(r)
+        auto_given = [False] * n.size
+        if au is not None:
+            au.setflags(write=False)
+            cum = np.concatenate([[0], np.cumsum(au)])
+            auto_given = (cum[ends] > cum[starts]).tolist()
         columns: list[tuple[str, np.ndarray | None, list[bool]]] = []
         for name, arr in (("origins", o), ("directions", d), ("ifov", f), ("pixels", px),
                           ("viewports", vp)):
@@ -171,6 +191,7 @@ class Rays:
             for name, arr, given in columns:
                 object.__setattr__(item, name, arr[a:b] if given[k] and arr is not None else None)
             object.__setattr__(item, "model_matrices", None)
+            object.__setattr__(item, "auto", au[a:b] if auto_given[k] and au is not None else None)
             out.append(item)
         return out
 
@@ -179,9 +200,11 @@ class Rays:
                      ifov: Sequence[float | None] | None = None,
                      pixels: Sequence[ArrayLike | None] | None = None,
                      viewports: Sequence[ArrayLike | None] | None = None,
-                     model_matrices: Sequence[ArrayLike | None] | None = None) -> Rays:
-        """Rays from per-ray values as JSON gives them (None where a ray has no such member);
-        model matrices as 16 numbers in column-major order (3D Tiles, CesiumJS)."""
+                     model_matrices: Sequence[ArrayLike | None] | None = None,
+                     auto: Sequence[bool | None] | None = None) -> Rays:
+        """Rays from per-ray values as JSON gives them (None where a ray has no such member;
+        ``auto`` None: clicked); model matrices as 16 numbers in column-major order (3D Tiles,
+        CesiumJS)."""
         n = len(origins)
         f = None
         if ifov is not None and any(v is not None for v in ifov):
@@ -192,9 +215,10 @@ class Rays:
             for i, m16 in enumerate(model_matrices):
                 if m16 is not None:
                     mm[i] = np.asarray(m16, dtype=np.float64).reshape(4, 4).T
+        au = None if auto is None else np.array([bool(a) for a in auto], dtype=bool)
         return cls(np.asarray(origins, dtype=np.float64).reshape(n, 3),
                    np.asarray(directions, dtype=np.float64).reshape(n, 3), f,
-                   _optional_rows(pixels, n, 2), _optional_rows(viewports, n, 2), mm)
+                   _optional_rows(pixels, n, 2), _optional_rows(viewports, n, 2), mm, au)
 
     def __len__(self) -> int:
         return int(self.origins.shape[0])
@@ -237,9 +261,10 @@ class Rays:
         d2 = d @ lin.T
         d2 /= np.linalg.norm(d2, axis=1, keepdims=True)
         o2 = o @ lin.T + s[:3, 3]
-        split = Rays.split(o2, d2, [len(self)], self.ifov, self.pixels, self.viewports)
+        split = Rays.split(o2, d2, [len(self)], self.ifov, self.pixels, self.viewports, self.auto)
         # out of range after the carry: the constructor names the ray
-        return split[0] if split else Rays(o2, d2, self.ifov, self.pixels, self.viewports)
+        return split[0] if split else Rays(o2, d2, self.ifov, self.pixels, self.viewports,
+                                           auto=self.auto)
 
     def to_json(self) -> list[JSONObject]:
         """The session-JSON ray objects (README, "Session JSON"), members only where given."""

@@ -59,7 +59,8 @@ def rays_of(rays: list[Ray]) -> RayArrays:
     ``rays[i].<member>`` for a value out of range."""
     return RayArrays.from_columns([r.origin for r in rays], [r.direction for r in rays],
                                   [r.ifov for r in rays], [r.pixel for r in rays],
-                                  [r.viewport for r in rays], [r.model_matrix for r in rays])
+                                  [r.viewport for r in rays], [r.model_matrix for r in rays],
+                                  [r.auto for r in rays])
 
 
 class SolveSettings(BaseModel):

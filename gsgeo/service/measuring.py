@@ -75,7 +75,8 @@ def stored_rays(rays: list[JSONObject]) -> Rays:
                 [_number(r.get("ifov")) for r in rays],
                 [_maybe_numbers(r.get("pixel"), 2) for r in rays],
                 [_maybe_numbers(r.get("viewport"), 2) for r in rays],
-                [_maybe_numbers(r.get("model_matrix"), 16) for r in rays])
+                [_maybe_numbers(r.get("model_matrix"), 16) for r in rays],
+                [r.get("auto") is True for r in rays])
     except (KeyError, TypeError, ValueError, OverflowError):
         pass
     return parse_rays(rays)[1]
@@ -151,7 +152,8 @@ def stored_rays_many(stored: Sequence[list[JSONObject]],
             d[sel] = d2 / np.linalg.norm(d2, axis=1, keepdims=True)
         if not np.all(np.isfinite(d)):
             raise ValueError("a direction cannot be carried")
-        split = Rays.split(o, d, counts, f, px, vp)
+        auto = np.array([r.get("auto") is True for r in flat], dtype=bool)
+        split = Rays.split(o, d, counts, f, px, vp, auto)
         if split is None:
             raise ValueError("a ray out of range: measured point by point")
         return list(split)
@@ -166,7 +168,7 @@ def stored_rays_many(stored: Sequence[list[JSONObject]],
         return out
 
 
-_RAY_KEYS = frozenset(RAY_KEYS + RAY_PROVENANCE_KEYS)  # (provenance: kept, not read)
+_RAY_KEYS = frozenset(RAY_KEYS + RAY_PROVENANCE_KEYS)
 
 
 def _number(v: JSON) -> float | None:

@@ -42,6 +42,12 @@ from gsgeo import limits
 from gsgeo.errors import GeometryError, InputError
 from gsgeo.solve.core import solve_core, solve_one, unit_directions
 from gsgeo.solve.outliers import snoop
+from gsgeo.solve.sharedaim import (
+    AUTO_UNWEIGHTED,
+    aim_scales,
+    reference_rays,
+    shared_aim_covariance,
+)
 from gsgeo.solve.stats import chi2_sf
 
 #: Largest intersection angle (degrees) below which rays count as parallel: an error.
@@ -227,6 +233,7 @@ def intersect(
     *,
     ifov: npt.ArrayLike | None = None,
     sigma_px: float = 1.0,
+    auto: npt.ArrayLike | None = None,
 ) -> IntersectionResult:
     """Least-squares intersection of N >= 2 rays in one Cartesian frame.
 
@@ -237,6 +244,9 @@ def intersect(
     ifov : None for the unweighted model, or the angular size of a pixel in radians, scalar
         or one per ray, for the angular model.
     sigma_px : a-priori aiming precision in pixels (angular model only).
+    auto : None, or (N,) bool: rays matched automatically to the first ray not marked auto
+        (auto-aim). In the angular model they are weighted by their match precision and share
+        that reference's aiming error (gsgeo.solve.sharedaim).
 
     Returns
     -------
@@ -269,6 +279,11 @@ def intersect(
         raise InputError(_direction_message(d, bad_d))
     f = _check_ifov(ifov, (n,))
     s_px = _check_sigma_px(sigma_px)
+    au = None if auto is None else np.asarray(auto, dtype=bool)
+    if au is not None and au.shape != (n,):
+        raise InputError(f"auto must give one flag per ray ({n}), got shape {au.shape}")
+    scales = None if f is None else aim_scales(au, (n,), s_px)
+    f_w = f if f is None or scales is None else f * scales  # weights: sigma_px x this x range
 
     max_angle, max_isect = intersection_angles(du)
     if max_isect < PARALLEL_LIMIT_DEG:
@@ -277,7 +292,7 @@ def intersect(
             f"{max_isect:.3g} degrees, below {PARALLEL_LIMIT_DEG} degrees; aim from "
             "viewpoints further apart"
         )
-    sol = solve_one(o, du, f, s_px)
+    sol = solve_one(o, du, f_w, s_px)
     ranges = sol.ranges[0]
     behind = ~(ranges > 0)
     if behind.any():
@@ -297,6 +312,14 @@ def intersect(
     sigma0 = math.sqrt(vtpv / dof)
     res_m = sol.residuals_m[0]
     res_px = None
+    apriori = ninv
+    if au is not None and reference_rays(au[None])[1][0]:
+        if f_w is None:
+            warnings.append(AUTO_UNWEIGHTED)
+        else:
+            apriori = shared_aim_covariance(sol.points, o[None], du[None], f_w[None], s_px,
+                                            np.ones((1, n), dtype=bool), au[None],
+                                            sol.normal_inverse)[0]
     if f is None:
         model = "unweighted"
         cov = sigma0**2 * ninv
@@ -309,13 +332,13 @@ def intersect(
         res_px = res_m / (f * ranges)
         p = float(chi2_sf(vtpv, dof))
         if p < GLOBAL_TEST_ALPHA:
-            cov = sigma0**2 * ninv
+            cov = sigma0**2 * apriori
             warnings.append(
                 f"the aiming scatter is {sigma0:.2f} times sigma_px = {s_px:g} px "
                 f"(global test p = {p:.2g}); the covariance is scaled up accordingly"
             )
         else:
-            cov = ninv.copy()
+            cov = apriori.copy()
     eig = np.linalg.eigvalsh(ninv)  # the inverse has the same condition number
     condition = float(eig[-1] / eig[0]) if eig[0] > 0 else math.inf
     flags, ratios = snoop(o, du, weights, sigma_m)
