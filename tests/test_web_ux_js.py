@@ -104,3 +104,33 @@ def test_auto_aim_and_enter_say_what_happened_and_what_to_do_next():
     assert t["one"].startswith("Nothing stored: P3 has 1 ray and a point needs 2 or more.")
     assert "another view" in t["one"] and "add ray 1" in t["zero"]
     assert max(len(x) for x in t.values()) < 130, t
+
+
+def test_navigation_arithmetic():
+    """web/js/navmath.js: wheel notches, the zoom about a point (checked by hand: the camera
+    stays on the line through the point, 0.8 of the distance per notch, stops 0.3 m short),
+    and the scale bar's 1-2-5 lengths."""
+    src = (f"import * as N from '{(WEB_JS / 'navmath.js').as_uri()}';\n"
+           """console.log(JSON.stringify({
+      notches: [N.notches({ deltaY: -100, deltaMode: 0 }), N.notches({ deltaY: 3, deltaMode: 1 }),
+                N.notches({ deltaY: -1, deltaMode: 2 })],
+      in1: N.zoomedPosition([10, 0, 0], [0, 0, 0], 1),
+      out2: N.zoomedPosition([0, 10, 0], [0, 0, 0], -2),
+      stop: N.zoomedPosition([0, 0, 1], [0, 0, 0], 20),
+      stopped: N.zoomedPosition([0, 0, 0.3], [0, 0, 0], 1),
+      bars: [N.scaleBar(0.01), N.scaleBar(0.5), N.scaleBar(30), N.scaleBar(0)],
+    }));""")
+    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    assert got["notches"] == [1, -1, 1]
+    assert got["in1"] == pytest.approx([8.0, 0, 0])
+    assert got["out2"] == pytest.approx([0, 10 / 0.64, 0])
+    assert got["stop"] == pytest.approx([0, 0, 0.3])
+    assert got["stopped"] is None
+    # 120 px at 1 cm/px = 1.2 m -> 1 m (100 px); 60 m -> 50 m; 3.6 km -> 2 km; none at 0
+    assert [(b["metres"], b["label"]) for b in got["bars"][:3]] == [
+        (1, "1 m"), (50, "50 m"), (2000, "2 km")]
+    assert got["bars"][0]["px"] == pytest.approx(100.0)
+    assert got["bars"][3] is None

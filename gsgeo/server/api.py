@@ -460,6 +460,12 @@ def delete_check_point(pid: PID, cid: ITEM, request: Request) -> Response:
     return Response(status_code=204)
 
 
+@router.post("/projects/{pid}/locate",
+             summary="Points the viewer shows (rendered ECEF) in the project's grid: E, N, H")
+def locate(pid: PID, body: m.LocateRequest, request: Request) -> dict[str, Any]:
+    return svc(request).locate(pid, body.points, body.model_matrix)
+
+
 @router.get("/projects/{pid}/accuracy",
             summary="Measured points against check points: dE dN dH, RMSE, ME, SD, counts")
 def accuracy(pid: PID, request: Request,

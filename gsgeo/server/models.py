@@ -13,7 +13,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
-from gsgeo.limits import IFOV_MAX, IFOV_MIN, SIGMA_PX_MAX, SIGMA_PX_MIN
+from gsgeo.limits import IFOV_MAX, IFOV_MIN, MAX_ORIGIN_M, SIGMA_PX_MAX, SIGMA_PX_MIN
 from gsgeo.measure import Rays as RayArrays
 from gsgeo.service import PointInput
 
@@ -61,6 +61,21 @@ def rays_of(rays: list[Ray]) -> RayArrays:
                                   [r.ifov for r in rays], [r.pixel for r in rays],
                                   [r.viewport for r in rays], [r.model_matrix for r in rays],
                                   [r.auto for r in rays])
+
+
+#: A position in rendered ECEF, metres: within MAX_ORIGIN_M of the Earth's centre per axis.
+Coord = Annotated[float, Field(ge=-MAX_ORIGIN_M, le=MAX_ORIGIN_M, allow_inf_nan=False)]
+Position = Annotated[list[Coord], Field(min_length=3, max_length=3)]
+
+
+class LocateRequest(BaseModel):
+    """Points the viewer shows, to be given in the project's grid (the cursor's splat)."""
+
+    model_config = ConfigDict(extra="forbid")
+    points: Annotated[list[Position], Field(min_length=1, max_length=1000)] = Field(
+        description="rendered ECEF, metres")
+    model_matrix: Mat16 | None = Field(
+        None, description="the tileset's modelMatrix, 16 numbers, column-major (absent: identity)")
 
 
 class SolveSettings(BaseModel):

@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 import orjson
 
+from gsgeo.crs.frames import ecef_to_geodetic
+from gsgeo.crs.grid import to_grid_many
 from gsgeo.crs.modelmatrix import (
     IDENTITY,
     apply_directions,
@@ -227,6 +229,31 @@ def solve_settings(settings: JSONObject, data_dir: Path | None,
                          geoid=find_geoid(settings.get("geoid"), data_dir),
                          source_crs=settings.get("source_crs") or "EPSG:4978",
                          sigma_px=float(settings.get("sigma_px") or 1.0), frame=frame)
+
+
+def locate_points(points: Sequence[Sequence[float]], settings: JSONObject,
+                  data_dir: Path | None, model_matrix: Sequence[float] | None = None
+                  ) -> list[JSONObject]:
+    """Points the viewer shows (rendered ECEF, metres; ``model_matrix`` the tileset's, 16
+    numbers column-major, None: identity) in a project's grid: easting, northing, height (the
+    grid's units, its vertical datum) and WGS 84 lon, lat (degrees), h_wgs84 (m); without a
+    grid CRS only the WGS 84 members. E.g. the splat under the viewer's cursor."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if model_matrix is not None:
+        m = matrix4(model_matrix)
+        if not np.array_equal(m, IDENTITY):
+            pts = apply_points(invert_affine(m), pts)
+    s = solve_settings(settings, data_dir)
+    if s.crs:
+        g = to_grid_many(pts, None, s.crs, vertical=s.vertical, geoid=s.geoid,
+                         source_crs=s.source_crs)
+        cols = {"easting": g.easting, "northing": g.northing, "height": g.height,
+                "lon": g.lon, "lat": g.lat, "h_wgs84": g.h_wgs84}
+    else:
+        lon, lat, h = ecef_to_geodetic(pts, s.source_crs)
+        cols = {"lon": np.asarray(lon), "lat": np.asarray(lat), "h_wgs84": np.asarray(h)}
+    lists = {k: np.asarray(v, dtype=np.float64).tolist() for k, v in cols.items()}
+    return [{k: v[i] for k, v in lists.items()} for i in range(pts.shape[0])]
 
 
 def measure(rays: Rays, settings: JSONObject, excluded: list[int],

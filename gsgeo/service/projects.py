@@ -50,6 +50,7 @@ from gsgeo.service.measuring import (
     check_excluded,
     find_geoid,
     json_ready,
+    locate_points,
     measure,
     measured_result,
     solve_settings,
@@ -1069,6 +1070,15 @@ class Projects(BuildingService):
                 audit.record(tx, pid, "deleted", "check point", None,
                              {"count": n, "points": gone}, None)
             return n
+
+    def locate(self, pid: str, points: list[list[float]],
+               model_matrix: list[float] | None = None) -> JSONObject:
+        """Points the viewer shows (rendered ECEF under ``model_matrix``) in the project's grid
+        (gsgeo.service.measuring.locate_points), with the grid's CRS and vertical datum."""
+        with self.store.transaction(write=False) as tx:
+            p = self._project(tx, pid)
+        return {"crs": p.crs, "vertical": p.vertical, "geoid": p.geoid,
+                "points": locate_points(points, p.settings(), self.data_dir, model_matrix)}
 
     def accuracy(self, pid: str, role: str = "check") -> JSONObject:
         """Measured minus check point coordinates in the project's grid, matched by id."""

@@ -16,6 +16,7 @@ import { RenderOnDemand, isSoftwareRenderer, msaaSamplesFor, rendererName, splat
 import { installGuide } from "./guide.js";
 import { Still } from "./still.js";
 import { nextView } from "./views.js";
+import { installNavigation } from "./navigate.js";
 
 const Cesium = window.Cesium;
 
@@ -196,8 +197,7 @@ async function loadScene(name, view = null) {
       viewer.camera.setView({ destination: c3(view.position),
         orientation: { direction: c3(view.direction), up: c3(view.up) } });
     } else {
-      const r = tileset.boundingSphere.radius;
-      await viewer.zoomTo(tileset, new Cesium.HeadingPitchRange(0.4, -0.6, r * 2.2));
+      await overview();
     }
   } catch (exc) {
     loading.scene = null;
@@ -237,6 +237,15 @@ async function georeferenceChanged(sim16) {
   await loadScenes();
   await loadScene(state.sceneName, view);
   await refreshProjectData();
+}
+
+/** The camera at the scene's overview: the whole tileset from the south-west, 34 degrees
+ *  down (the view a scene opens with; Home returns to it). */
+async function overview() {
+  const t = state.tileset;
+  if (!t) return;
+  viewer.camera.cancelFlight();
+  await viewer.zoomTo(t, new Cesium.HeadingPitchRange(0.4, -0.6, t.boundingSphere.radius * 2.2));
 }
 
 function sceneCentre() {
@@ -497,6 +506,7 @@ const ctx = {
 const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged });
 const buildings = buildingsPanel({ state, draw, modelMatrix, message, fail });
 installGuide(ctx, draw.overlay);
+const navigation = installNavigation(ctx, { overview });
 
 // ---------------------------------------------------------------------------------------
 // points
@@ -890,6 +900,12 @@ document.addEventListener("keydown", (ev) => {
   else if (key === "e" || key === "E") { setConf(state.conf === "95" ? "1" : "95"); ev.preventDefault(); }
   else if (key === "g" || key === "G") { georef.toggle(); ev.preventDefault(); }
   else if (key === "v" || key === "V") { nextView(ctx); ev.preventDefault(); }
+  else if (key === "Home") { navigation.home(); ev.preventDefault(); }
+  else if (key === "+" || key === "=" || key === "-") {
+    const c = viewer.scene.canvas;
+    navigation.zoom([c.clientWidth / 2, c.clientHeight / 2], key === "-" ? -1 : 1);
+    ev.preventDefault();
+  }
   else if (key === "?" || key === "h" || key === "H") { toggleHelp(true); ev.preventDefault(); }
   else if (key === "Escape" && state.selected) { selectPoint(null, false); }
 });

@@ -1,0 +1,147 @@
+"""Navigation made for a splat scene (web/js/navigate.js), with real mouse and keyboard events on
+the demo (`gsgeo demo`) in Chromium.
+
+- 20 wheel notches towards a ground marker (G1) seen from 12 m, the mouse on the pixel of the
+  marker: after every notch the camera is above the ground there (the marker's truth height,
+  gsgeo.demo.place) and not closer to the ground under the cursor than the stop (MIN_GAP_M,
+  less 1 cm for the splats' depth), and that ground point stays under the cursor within
+  10 px; the last notches no longer move it (it stopped short of the surface).
+  Notches back move it away along the same line.
+- Home returns the camera to the overview the scene opened with.
+- The cursor resting on a marker shows its grid coordinates (EPSG:27700, E N H) in the status
+  bar, within 5 cm of the truth; the scale bar's length in metres spans its pixels at the depth
+  of the view's centre (within 2 %), and the north arrow turns with the camera's heading.
+
+Truth: gsgeo.demo.place.truth_points() (PROJ, independent of the viewer).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pyproj
+import pytest
+
+from gsgeo.demo import place
+from gsgeo.demo.project import PROJECT_ID
+from tests.e2e.shared import open_demo_page
+from tests.e2e.workplace import AIM_JS
+
+pytestmark = pytest.mark.e2e
+
+VIEWPORT = {"width": 1280, "height": 720}
+MIN_GAP_M = 0.3  # navigate.js
+TO_GEO = pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
+POSE_JS = """() => { const c = gsgeo.viewer.camera, p = c.positionWC, d = c.directionWC;
+    return {position: [p.x, p.y, p.z], direction: [d.x, d.y, d.z], heading: c.heading}; }"""
+#: Where the ray through page position (x, y) meets the level plane through point g (ECEF): the
+#: ground the cursor is on (the mouse sits on whole CSS pixels; G1 is a fraction of one away).
+GROUND_UNDER_JS = """([x, y, g]) => { const C = gsgeo.Cesium, v = gsgeo.viewer;
+    const r = v.scene.canvas.getBoundingClientRect();
+    const ray = v.camera.getPickRay(new C.Cartesian2(x - r.left, y - r.top));
+    const G = new C.Cartesian3(...g), up = C.Ellipsoid.WGS84.geodeticSurfaceNormal(G, new C.Cartesian3());
+    const t = C.Cartesian3.dot(C.Cartesian3.subtract(G, ray.origin, new C.Cartesian3()), up)
+      / C.Cartesian3.dot(ray.direction, up);
+    const p = C.Ray.getPoint(ray, t);
+    return [p.x, p.y, p.z]; }"""
+WINDOW_JS = """(p) => { const C = gsgeo.Cesium;
+    const w = C.SceneTransforms.worldToWindowCoordinates(gsgeo.viewer.scene, new C.Cartesian3(...p));
+    const r = gsgeo.viewer.scene.canvas.getBoundingClientRect();
+    return w ? [r.left + w.x, r.top + w.y] : null; }"""
+
+
+@pytest.fixture(scope="module")
+def page(demo_server, browser):
+    yield from open_demo_page(browser, demo_server, PROJECT_ID, VIEWPORT)
+
+
+def truth(pid: str):
+    return next(t for t in place.truth_points() if t.id == pid)
+
+
+def height(ecef) -> float:
+    return float(TO_GEO.transform(*map(float, ecef))[2])
+
+
+def wait_idle(p) -> None:
+    p.wait_for_function("gsgeo.navigation && !gsgeo.navigation.busy")
+
+
+def test_wheel_zooms_about_the_splat_under_the_cursor_and_home_returns(page):
+    p = page
+    overview = p.evaluate(POSE_JS)
+    g1 = truth("G1")
+    aim = p.evaluate(AIM_JS, [list(g1.ecef), 200.0, 45.0, 12.0, [0.4, -0.3, 0.0]])
+    cursor = (round(aim["x"]), round(aim["y"]))  # where a mouse can be: on whole pixels
+    p.mouse.move(*cursor)
+    target = np.asarray(p.evaluate(GROUND_UNDER_JS, [*cursor, list(g1.ecef)]))
+    assert np.linalg.norm(target - np.asarray(g1.ecef)) < 0.02  # G1 is under the cursor
+    ground = height(g1.ecef)
+    distances = []
+    for _ in range(20):
+        wheels = p.evaluate("gsgeo.navigation.wheels")
+        p.mouse.wheel(0, -100)  # one notch towards the scene
+        p.wait_for_function(f"gsgeo.navigation.wheels > {wheels}")
+        wait_idle(p)
+        pose = p.evaluate(POSE_JS)
+        cam = np.asarray(pose["position"])
+        distances.append(float(np.linalg.norm(cam - target)))
+        assert height(cam) > ground, (height(cam), ground)  # never below the ground
+        assert distances[-1] > MIN_GAP_M - 0.01, distances  # never through the surface
+        win = p.evaluate(WINDOW_JS, target.tolist())
+        assert win is not None and np.hypot(win[0] - cursor[0], win[1] - cursor[1]) < 10, (win, cursor)
+    assert distances[0] < 12.0 * 0.85, distances  # it moved in
+    assert distances[-1] < 0.5, distances  # and stopped at the surface
+    assert distances[-1] == pytest.approx(distances[-2], abs=1e-6)  # the last notches: stopped
+    # notches back move it away along the same line
+    for _ in range(3):
+        wheels = p.evaluate("gsgeo.navigation.wheels")
+        p.mouse.wheel(0, 100)
+        p.wait_for_function(f"gsgeo.navigation.wheels > {wheels}")
+        wait_idle(p)
+    back = float(np.linalg.norm(np.asarray(p.evaluate(POSE_JS)["position"]) - target))
+    assert back == pytest.approx(distances[-1] / 0.8**3, rel=0.05), (back, distances[-1])
+
+    # Home: the overview the scene opened with
+    p.keyboard.press("Home")
+    p.wait_for_function("""(o) => { const p = gsgeo.viewer.camera.positionWC;
+        return Math.hypot(p.x - o[0], p.y - o[1], p.z - o[2]) < 0.01; }""", arg=overview["position"])
+    assert np.allclose(p.evaluate(POSE_JS)["direction"], overview["direction"], atol=1e-6)
+    assert not p.errors, p.errors
+
+
+def test_cursor_coordinates_scale_bar_and_north_arrow(page):
+    p = page
+    b1 = truth("B1")
+    aim = p.evaluate(AIM_JS, [list(b1.ecef), 120.0, 50.0, 14.0, [0.0, 0.0, 0.0]])
+    p.mouse.move(aim["x"] + 3, aim["y"] + 3)
+    p.mouse.move(aim["x"], aim["y"])  # and rests there
+    p.wait_for_function("gsgeo.navigation.cursor && gsgeo.navigation.cursor.located"
+                        f" && Math.abs(gsgeo.navigation.cursor.pos[0] - {aim['win'][0]}) < 0.5")
+    text = p.inner_text("#cursor-coords")
+    m = re.search(r"E (\d+\.\d{3})\s+N (\d+\.\d{3})\s+H (-?\d+\.\d{3})\s+\(EPSG:27700\)", text)
+    assert m, text
+    enh = np.array([float(x) for x in m.groups()])
+    err = enh - np.array([b1.easting, b1.northing, b1.height])
+    assert np.linalg.norm(err) < 0.05, err
+
+    # the scale bar at the depth of the view's centre (the marker: the camera looks at it)
+    p.wait_for_function("!document.querySelector('#scale-bar').hidden"
+                        " && gsgeo.navigation.centreDepth !== null")
+    depth = p.evaluate("gsgeo.navigation.centreDepth")
+    assert depth == pytest.approx(14.0, abs=0.3)
+    px = float(p.evaluate("parseFloat(document.querySelector('#scale-bar .bar').style.width)"))
+    metres = float(p.get_attribute("#scale-bar", "data-metres"))
+    fovy, height_px = p.evaluate("[gsgeo.viewer.camera.frustum.fovy, gsgeo.viewer.scene.canvas.clientHeight]")
+    per_px = 2 * np.tan(fovy / 2) * depth / height_px
+    assert metres / px == pytest.approx(per_px, rel=0.02)
+    label = p.inner_text("#scale-bar .label")
+    assert label in {f"{metres:g} m", f"{round(metres * 100)} cm"}, label
+
+    # the north arrow turns against the heading
+    heading = p.evaluate("gsgeo.viewer.camera.heading")
+    transform = p.evaluate("document.querySelector('#north-arrow').style.transform")
+    angle = float(re.search(r"rotate\((-?[\d.e-]+)deg\)", transform).group(1))
+    assert angle == pytest.approx(-np.degrees(heading), abs=0.01)
+    assert not p.errors, p.errors

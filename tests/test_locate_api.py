@@ -1,0 +1,62 @@
+"""POST /api/projects/{pid}/locate: points the viewer shows (rendered ECEF, under the tileset's
+modelMatrix) in the project's grid, as the cursor's coordinates use it. Expected values from
+pyproj directly (ETRS89 / UTM 30N's E, N and WGS 84 ellipsoidal height near London)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pyproj
+from servertools import LONDON
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    from fastapi.testclient import TestClient
+
+from gsgeo.server.app import ServerConfig, create_app
+
+TO_ECEF = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
+UTM30 = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:32630", always_xy=True)
+
+
+def test_points_come_back_in_the_grid_and_bad_input_is_4xx(tmp_path):
+    with TestClient(create_app(ServerConfig(data_dir=tmp_path / "data",
+                                            allowed_hosts={"testserver"}))) as c:
+        assert c.post("/api/projects", json={"name": "G", "id": "g", "crs": "EPSG:32630"}
+                      ).status_code == 201
+        assert c.post("/api/projects", json={"name": "W", "id": "w"}).status_code == 201
+        lon, lat, h = LONDON[0], LONDON[1], 40.0
+        ecef = np.array(TO_ECEF.transform(lon, lat, h))
+        e, n = UTM30.transform(lon, lat)
+        r = c.post("/api/projects/g/locate", json={"points": [ecef.tolist()]})
+        assert r.status_code == 200, r.text
+        body = r.json()
+        assert body["crs"] == "EPSG:32630"
+        got = body["points"][0]
+        assert abs(got["easting"] - e) < 1e-3 and abs(got["northing"] - n) < 1e-3
+        assert abs(got["height"] - h) < 1e-3 and abs(got["h_wgs84"] - h) < 1e-3
+
+        # under a modelMatrix (the scene shifted 100 m in x for the viewer): undone first
+        shift = np.eye(4)
+        shift[0, 3] = 100.0
+        m16 = shift.T.reshape(-1).tolist()
+        r = c.post("/api/projects/g/locate", json={"points": [(ecef + [100.0, 0, 0]).tolist()],
+                                                   "model_matrix": m16})
+        assert r.status_code == 200, r.text
+        assert abs(r.json()["points"][0]["easting"] - e) < 1e-3
+
+        # no grid CRS: WGS 84 only
+        r = c.post("/api/projects/w/locate", json={"points": [ecef.tolist()]})
+        assert r.status_code == 200, r.text
+        w = r.json()["points"][0]
+        assert "easting" not in w and abs(w["lon"] - lon) < 1e-9 and abs(w["lat"] - lat) < 1e-9
+
+        # bad input: named, never a 500
+        assert c.post("/api/projects/nope/locate", json={"points": [ecef.tolist()]}).status_code == 404
+        for bad in ({"points": []}, {"points": [[1.0, 2.0]]}, {"points": [[1e12, 0.0, 0.0]]},
+                    {"points": [ecef.tolist()], "model_matrix": [0.0] * 16},
+                    {"points": [ecef.tolist()], "extra": 1}):
+            r = c.post("/api/projects/g/locate", json=bad)
+            assert 400 <= r.status_code < 500, (bad, r.status_code, r.text)
+            assert r.json().get("message"), r.text
