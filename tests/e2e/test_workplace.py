@@ -520,13 +520,33 @@ def test_stores_merge_the_servers_answer(server, browser, project):
         # deleting the line, then the point
         p.page.click(f"#features-table button[title='delete {line['id']}']")
         p.page.wait_for_function(f"!gsgeo.state.lines.some((f) => f.id === '{line['id']}')")
-        p.page.click("#point-detail button.danger")
+        before = p.page.evaluate(f"gsgeo.state.points.find((q) => q.id === '{a}')")
         with p.page.expect_response(lambda r: r.request.method == "DELETE"):
-            p.page.click("#point-detail button.danger")
+            p.page.click("#point-detail button.danger")  # one click
         p.page.wait_for_selector(row, state="detached")
         assert a not in p.page.evaluate("gsgeo.state.points.map((q) => q.id)")
         p.page.wait_for_timeout(300)
         assert not [g for g in gets if refetched.match(g)], gets
+        # Ctrl+Z brings it back through the API: its id, code, rays (the exclusion kept) and
+        # its point, in the store and in the audit trail
+        with p.page.expect_response(lambda r: r.url.endswith("/points")
+                                    and r.request.method == "POST") as resp:
+            p.page.keyboard.press("Control+z")
+        assert resp.value.status == 201, resp.value.text()
+        p.page.wait_for_selector(row)
+        import httpx
+
+        got = httpx.get(f"{server}/api/projects/{project}/points/{a}").json()
+        assert got["code"] == "merge a" and got["excluded"] == [0]
+        assert [r["direction"] for r in got["rays"]] == [r["direction"] for r in before["rays"]]
+        assert np.allclose(got["result"]["point_ecef"], before["result"]["point_ecef"], atol=1e-6)
+        trail = httpx.get(f"{server}/api/projects/{project}/audit",
+                          params={"item": a, "order": "oldest"}).json()["entries"]
+        assert [e["action"] for e in trail][-2:] == ["deleted", "created"], trail
+        # and Ctrl+Shift+Z deletes it again
+        with p.page.expect_response(lambda r: r.request.method == "DELETE"):
+            p.page.keyboard.press("Control+Shift+Z")
+        p.page.wait_for_selector(row, state="detached")
         assert p.errors == []
     finally:
         p.close()

@@ -16,6 +16,7 @@ import { RenderOnDemand, isSoftwareRenderer, msaaSamplesFor, rendererName, splat
 import { installGuide } from "./guide.js";
 import { Still } from "./still.js";
 import { nextView } from "./views.js";
+import { raysInCurrentFrame } from "./rays.js";
 import { installNavigation } from "./navigate.js";
 
 const Cesium = window.Cesium;
@@ -573,21 +574,56 @@ async function patchPoint(id, body) {
   } catch (exc) { fail(exc); }
 }
 
-let deleteArmed = null;
+// Undo and redo (Ctrl+Z, Ctrl+Shift+Z or Ctrl+Y) of what the operator changed, each step
+// through the API so that the store and its audit trail say what happened: {label, undo, redo}
+// of async functions, for the open project.
+const undoSteps = { done: [], undone: [], project: null };
 
-async function deletePoint(id, button) {
-  if (deleteArmed !== id) {
-    deleteArmed = id;
-    button.textContent = `Really delete ${id}?`;
-    setTimeout(() => { if (deleteArmed === id) { deleteArmed = null; button.textContent = "Delete"; } }, 4000);
-    return;
+function remember(step) {
+  if (undoSteps.project !== (state.project && state.project.id)) {
+    undoSteps.done = []; undoSteps.undone = [];
+    undoSteps.project = state.project && state.project.id;
   }
-  deleteArmed = null;
+  undoSteps.done.push(step);
+  undoSteps.undone = [];
+}
+
+async function undoRedo(redo) {
+  if (undoSteps.project !== (state.project && state.project.id)) return;
+  const from = redo ? undoSteps.undone : undoSteps.done;
+  const step = from.pop();
+  if (!step) { message(redo ? "Nothing to redo." : "Nothing to undo."); return; }
   try {
-    await api("DELETE", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`);
-    await pointDeleted(id);
-    message(`Deleted ${id}.`);
+    await (redo ? step.redo() : step.undo());
+    (redo ? undoSteps.done : undoSteps.undone).push(step);
+    message(`${redo ? "Redone" : "Undone"}: ${step.label}.`);
   } catch (exc) { fail(exc); }
+}
+
+/** Delete point `id` (one click; Ctrl+Z brings it back with its rays, id, code and
+ *  description, measured again in the scene's current frame). */
+async function deletePoint(id) {
+  const pt = pointById(id);
+  try {
+    await removePoint(id);
+    if (pt) remember({ label: `delete ${id}`, undo: () => restorePoint(pt), redo: () => removePoint(id) });
+    message(`Deleted ${id}. Ctrl+Z brings it back.`);
+  } catch (exc) { fail(exc); }
+}
+
+async function removePoint(id) {
+  await api("DELETE", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`);
+  await pointDeleted(id);
+}
+
+/** Store point `pt` (as the server gave it before its deletion) again. */
+async function restorePoint(pt) {
+  const stored = await api("POST", `/projects/${encodeURIComponent(state.project.id)}/points`, {
+    id: pt.id, code: pt.code || "", description: pt.description || "",
+    rays: raysInCurrentFrame(pt, modelMatrix()), excluded: pt.excluded || [],
+    georef_version: currentGeorefVersion(),
+  });
+  await pointStored(stored);
 }
 
 function renderPointDetail() {
@@ -622,7 +658,7 @@ function renderPointDetail() {
     h("td", {}, h("button", {
       onclick: () => patchPoint(p.id, rr.excluded ? { restore_ray: rr.index } : { exclude_ray: rr.index }),
     }, rr.excluded ? "restore" : "exclude"))));
-  const delBtn = h("button", { class: "danger", onclick: (ev) => deletePoint(p.id, ev.currentTarget) }, "Delete");
+  const delBtn = h("button", { class: "danger", title: "delete (Ctrl+Z undoes)", onclick: () => deletePoint(p.id) }, "Delete");
   box.replaceChildren(
     h("div", { class: "kv" }, ...kv),
     renameRow(p.id),
@@ -872,9 +908,14 @@ function toggleHelp(show) {
 }
 
 document.addEventListener("keydown", (ev) => {
-  if (ev.ctrlKey || ev.altKey || ev.metaKey) return;
   const t = ev.target;
   const typing = t && (t.tagName === "INPUT" || t.tagName === "TEXTAREA" || t.tagName === "SELECT");
+  if ((ev.ctrlKey || ev.metaKey) && !ev.altKey && !typing && (ev.key === "z" || ev.key === "Z" || ev.key === "y")) {
+    undoRedo(ev.key === "y" || ev.shiftKey);
+    ev.preventDefault();
+    return;
+  }
+  if (ev.ctrlKey || ev.altKey || ev.metaKey) return;
   if (!$("#help").hidden) {
     if (ev.key === "Escape" || ev.key === "?" || ev.key === "h" || ev.key === "H") { toggleHelp(false); ev.preventDefault(); }
     return;
