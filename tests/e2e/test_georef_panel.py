@@ -343,4 +343,10 @@ def test_report_button_downloads_the_pdf(server, page):
         dl.value.suggested_filename.endswith(".pdf")
     path = dl.value.path()
     assert path.read_bytes()[:5] == b"%PDF-"
+    # the same report from the main bar, the panel closed
+    page.keyboard.press("g")
+    page.wait_for_selector("#georef-panel", state="hidden")
+    with page.expect_download(timeout=120_000) as dl:
+        page.click("#btn-report")
+    assert dl.value.path().read_bytes()[:5] == b"%PDF-"
     assert page.errors == [], page.errors

@@ -204,6 +204,15 @@ def test_create_project_and_measure_known_point(server, browser):
         # residuals of exact clicks are tiny; every ray has one
         res_px = [float(t) for t in p.page.locator("#ray-table tbody tr td:nth-child(2)").all_inner_texts()]
         assert len(res_px) == 4 and max(res_px) < 0.05, res_px
+        # each ray says where it was taken from (the views' azimuth, elevation and range about
+        # the marker, which the solution is within millimetres of) and that it was clicked
+        stations = p.page.locator("#ray-table tbody tr td.station").all_inner_texts()
+        for text, (az, el, rng, _) in zip(stations, VIEWPOINTS, strict=True):
+            got = re.fullmatch(r"az ([\d.]+)° el (-?[\d.]+)° ([\d.]+) m", text)
+            assert got, text
+            assert abs((float(got[1]) - az + 180) % 360 - 180) < 0.2 and abs(float(got[2]) - el) < 0.2, text
+            assert abs(float(got[3]) - rng) < 0.02, text
+        assert p.page.locator("#ray-table tbody tr td.source").all_inner_texts() == ["click"] * 4
         # the ellipsoid is drawn at its true size: 2.7955 sqrt(eigenvalues of the covariance)
         cov = np.array(p.page.evaluate("gsgeo.state.measure.solution.cov_ecef"))
         expect = 2.7955 * np.sqrt(np.sort(np.linalg.eigvalsh(cov))[::-1]) * 1000  # mm

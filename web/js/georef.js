@@ -241,7 +241,7 @@ export function georefPanel(ctx) {
   }
 
   async function report() {
-    if (!state.project) return;
+    if (!state.project) { ctx.message("Open a project first: the report is a project's.", true); return; }
     try {
       const name = await download(`${pidPath()}/report?format=pdf`, `${state.project.id}-report.pdf`);
       ctx.message(`Downloaded ${name}.`);
@@ -263,6 +263,7 @@ export function georefPanel(ctx) {
   $("#btn-georef-apply").addEventListener("click", askApply);
   $("#btn-georef-undo").addEventListener("click", askUndo);
   $("#btn-georef-report").addEventListener("click", report);
+  $("#btn-report").addEventListener("click", (ev) => { report(); ev.currentTarget.blur(); });
   $("#btn-georef-confirm").addEventListener("click", confirmed);
   $("#btn-georef-cancel").addEventListener("click", closeConfirm);
 

@@ -9,7 +9,7 @@
 import { api } from "../api.js";
 import { COLORS } from "../draw.js";
 import { $, fixed, h, mm } from "../format.js";
-import { applyPoint, norm, sub } from "../linalg.js";
+import { IDENTITY16, applyPoint, norm, sub } from "../linalg.js";
 import { captureRay, raysInCurrentFrame } from "../rays.js";
 import { nextPointId } from "../pointid.js";
 import { closeIdPrompt, idError, idPromptOpen, openIdPrompt, promptedId } from "../idprompt.js";
@@ -81,7 +81,27 @@ function solutionText(res) {
   return lines.join("\n");
 }
 
-/** The panel: one row per ray (residuals, outlier flag, exclude button) and the live solution. */
+/** Where ray `ray` was taken from, seen from the solved point `pointEcef` (georeferenced ECEF,
+ *  carried into the ray's rendered frame by its model matrix): azimuth from north and
+ *  elevation (degrees, in the point's local east-north-up) and range (m) of its camera. */
+export function station(ray, pointEcef) {
+  const Cesium = window.Cesium;
+  const p = applyPoint(ray.model_matrix || IDENTITY16, pointEcef);
+  const enu = Cesium.Transforms.eastNorthUpToFixedFrame(new Cesium.Cartesian3(...p));
+  const local = Cesium.Matrix4.multiplyByPoint(Cesium.Matrix4.inverseTransformation(enu, new Cesium.Matrix4()),
+    new Cesium.Cartesian3(...ray.origin), new Cesium.Cartesian3());
+  const range = Cesium.Cartesian3.magnitude(local);
+  const az = (Cesium.Math.toDegrees(Math.atan2(local.x, local.y)) + 360) % 360;
+  const el = Cesium.Math.toDegrees(Math.atan2(local.z, Math.hypot(local.x, local.y)));
+  return { az, el, range };
+}
+
+function stationText(s) {
+  return `az ${s.az.toFixed(1)}° el ${s.el.toFixed(1)}° ${s.range.toFixed(2)} m`;
+}
+
+/** The panel: one row per ray (residuals, outlier flag, where it was taken from, click or
+ *  auto, exclude button) and the live solution. */
 function render(ctx, busy = false) {
   const m = ctx.state.measure;
   if (!m) return;
@@ -95,6 +115,8 @@ function render(ctx, busy = false) {
       h("td", noHit ? { title: noHitText(m, i) } : {}, `${i + 1}${outlier ? " ⚑ outlier" : ""}${noHit ? " ⚠ hits no splat (sky?)" : ""}`, ...rayBadge(ray)),
       h("td", { class: "num" }, rr ? fixed(rr.residual_px, 2) : "—"),
       h("td", { class: "num" }, rr ? mm(rr.residual_m) : "—"),
+      h("td", { class: "station" }, res && res.point_ecef ? stationText(station(ray, res.point_ecef)) : "—"),
+      h("td", { class: "source" }, ray.auto ? "auto" : "click"),
       h("td", {}, h("button", { onclick: () => toggleExclude(ctx, i), title: excluded ? "use this ray again" : "leave this ray out of the solution" }, excluded ? "restore" : "exclude")));
   }));
   const live = $("#live-solution");
