@@ -11,6 +11,8 @@ the demo (`gsgeo demo`) in Chromium.
 - The cursor resting on a marker shows its grid coordinates (EPSG:27700, E N H) in the status
   bar, within 5 cm of the truth; the scale bar's length in metres spans its pixels at the depth
   of the view's centre (within 2 %), and the north arrow turns with the camera's heading.
+- H held hides every aid over the scene (overlay, status line, north arrow, scale bar,
+  coordinates): nothing but the scene's canvas is seen; released, they are back.
 
 Truth: gsgeo.demo.place.truth_points() (PROJ, independent of the viewer).
 """
@@ -49,6 +51,12 @@ WINDOW_JS = """(p) => { const C = gsgeo.Cesium;
     const w = C.SceneTransforms.worldToWindowCoordinates(gsgeo.viewer.scene, new C.Cartesian3(...p));
     const r = gsgeo.viewer.scene.canvas.getBoundingClientRect();
     return w ? [r.left + w.x, r.top + w.y] : null; }"""
+
+
+#: What is seen over the scene's canvas in the viewer: the ids (or class) of the visible elements.
+AIDS_JS = """() => [...document.querySelectorAll('#viewer-wrap > *')].filter((e) => e.id !== 'cesium'
+    && !e.hidden && getComputedStyle(e).display !== 'none' && getComputedStyle(e).visibility !== 'hidden'
+    && e.getBoundingClientRect().width > 0).map((e) => e.id || e.className)"""
 
 
 @pytest.fixture(scope="module")
@@ -144,4 +152,12 @@ def test_cursor_coordinates_scale_bar_and_north_arrow(page):
     transform = p.evaluate("document.querySelector('#north-arrow').style.transform")
     angle = float(re.search(r"rotate\((-?[\d.e-]+)deg\)", transform).group(1))
     assert angle == pytest.approx(-np.degrees(heading), abs=0.01)
+
+    # H held: the scene alone; released: the aids are back
+    shown = p.evaluate(AIDS_JS)
+    assert {"gsgeo-overlay", "status", "north-arrow", "scale-bar", "cursor-coords"} <= set(shown), shown
+    p.keyboard.down("h")
+    assert p.evaluate(AIDS_JS) == [], p.evaluate(AIDS_JS)
+    p.keyboard.up("h")
+    assert p.evaluate(AIDS_JS) == shown
     assert not p.errors, p.errors

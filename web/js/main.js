@@ -917,7 +917,7 @@ document.addEventListener("keydown", (ev) => {
   }
   if (ev.ctrlKey || ev.altKey || ev.metaKey) return;
   if (!$("#help").hidden) {
-    if (ev.key === "Escape" || ev.key === "?" || ev.key === "h" || ev.key === "H") { toggleHelp(false); ev.preventDefault(); }
+    if (ev.key === "Escape" || ev.key === "?") { toggleHelp(false); ev.preventDefault(); }
     return;
   }
   if (!$("#project-dialog").hidden) {
@@ -947,9 +947,17 @@ document.addEventListener("keydown", (ev) => {
     navigation.zoom([c.clientWidth / 2, c.clientHeight / 2], key === "-" ? -1 : 1);
     ev.preventDefault();
   }
-  else if (key === "?" || key === "h" || key === "H") { toggleHelp(true); ev.preventDefault(); }
+  else if (key === "?") { toggleHelp(true); ev.preventDefault(); }
+  else if (key === "h" || key === "H") { setAidsHidden(true); ev.preventDefault(); }
   else if (key === "Escape" && state.selected) { selectPoint(null, false); }
 });
+
+/** While H is held the scene is shown alone: every aid drawn over it is hidden (style.css). */
+function setAidsHidden(hidden) {
+  $("#viewer-wrap").classList.toggle("aids-hidden", hidden);
+}
+document.addEventListener("keyup", (ev) => { if (ev.key === "h" || ev.key === "H") setAidsHidden(false); });
+window.addEventListener("blur", () => setAidsHidden(false));
 
 function setConf(value) {
   state.conf = value;
