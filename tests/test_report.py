@@ -337,3 +337,33 @@ def test_api_serves_both_formats_and_404s_an_unknown_project(data_dir):
         assert r.status_code == 404 and "nope" in r.json()["message"]
         r = client.get("/api/projects/wharf/report?format=docx")
         assert r.status_code == 422 and r.json()["field"] == "format"
+
+
+def test_lines_and_polygons_are_reported_with_grid_measures(svc, monkeypatch):
+    """A line and a polygon of measured targets: their lengths, area and perimeter (against a
+    hand computation from the points' grid E, N, H) are in the PDF, said to be grid values."""
+    monkeypatch.setattr(svc, "georeference_status", lambda pid: STATUS, raising=False)
+    svc.add_feature("wharf", "line", {"id": "L1", "code": "kerb", "points": ["C0", "C1", "C2"]})
+    svc.add_feature("wharf", "polygon", {"id": "A1", "points": ["C0", "C1", "C5", "C4"]})
+    data = report_data(svc, "wharf")
+    rec = {q.id: q.record for q in svc.list_points("wharf")}
+    enh = {k: np.array([rec[k]["easting"], rec[k]["northing"], rec[k]["height"]]) for k in rec}
+    line = [enh[k] for k in ("C0", "C1", "C2")]
+    l2 = sum(np.hypot(*(b - a)[:2]) for a, b in zip(line, line[1:], strict=False))
+    l3 = sum(np.linalg.norm(b - a) for a, b in zip(line, line[1:], strict=False))
+    ring = np.array([enh[k][:2] for k in ("C0", "C1", "C5", "C4")])
+    x, y = (ring - ring.mean(axis=0)).T  # centred: the shoelace on 10^6 m coordinates loses mm
+    area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    perimeter = np.sum(np.hypot(*(np.roll(ring, -1, axis=0) - ring).T))
+    (got_line,) = data["lines"]
+    (got_poly,) = data["polygons"]
+    assert got_line["length_2d"] == pytest.approx(l2, abs=1e-6)
+    assert got_line["length_3d"] == pytest.approx(l3, abs=1e-6)
+    assert got_poly["area_2d"] == pytest.approx(area, rel=1e-9)
+    assert got_poly["perimeter_2d"] == pytest.approx(perimeter, abs=1e-6)
+    flat = re.sub(r"\s+", " ", " ".join(
+        p.extract_text() for p in pypdf.PdfReader(io.BytesIO(render(data, "pdf"))).pages))
+    assert "Lines and polygons (1 / 1)" in flat
+    assert "L1" in flat and "kerb" in flat and "C0, C1, C2" in flat
+    assert fmt_m(l2) in flat and fmt_m(l3) in flat and fmt_m(perimeter) in flat
+    assert "length 2-D, grid" in flat and "not reduced to the ground" in flat

@@ -203,6 +203,13 @@ def _point_rows(points: list[PointRecord]) -> tuple[list[JSONObject], list[JSONO
     return grid, ecef, failed
 
 
+def _feature_rows(svc: Projects, pid: str, kind: str) -> list[JSONObject]:
+    """The project's lines or polygons: id, code, point ids and their measures (grid metres,
+    1σ; gsgeo.service.projects.feature_measures), or the error that prevents them."""
+    return [{"id": f.id, "code": f.code, "points": list(f.point_ids)} | dict(measures)
+            for f, measures in svc.list_features(pid, kind)]
+
+
 #: How many of the latest audit entries the report lists (the counts cover all of them).
 AUDIT_ROWS = 50
 
@@ -236,6 +243,8 @@ def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
         "failed_points": failed,
         "check_points": {"check": sum(1 for c in cps if c.role == "check"),
                          "control": len(control)},
+        "lines": _feature_rows(svc, pid, "line"),
+        "polygons": _feature_rows(svc, pid, "polygon"),
         # the latest changes (newest first) and how many of each action there are in all
         "audit": audit_page(svc.store, pid, limit=AUDIT_ROWS),
     }
