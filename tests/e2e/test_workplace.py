@@ -526,6 +526,21 @@ def test_stores_merge_the_servers_answer(server, browser, project):
         p.page.wait_for_timeout(300)
         assert [g for g in gets if refetched.match(g)] == [f"{project}/lines"], gets
         gets.clear()
+        # the code and description edited after storing, then Ctrl+Z: both back, in the store
+        p.page.click("#btn-edit")
+        p.page.fill("#edit-code", "kerb edge")
+        p.page.fill("#edit-description", "north side")
+        with p.page.expect_response(lambda r: r.request.method == "PATCH") as resp:
+            p.page.keyboard.press("Enter")
+        assert resp.value.request.post_data_json == {"code": "kerb edge", "description": "north side"}
+        p.page.wait_for_function(f"gsgeo.state.points.find((q) => q.id === '{a}').code === 'kerb edge'")
+        with p.page.expect_response(lambda r: r.request.method == "PATCH") as resp:
+            p.page.keyboard.press("Control+z")
+        assert resp.value.request.post_data_json == {"code": "merge a", "description": ""}
+        p.page.wait_for_function(f"gsgeo.state.points.find((q) => q.id === '{a}').code === 'merge a'")
+        p.page.wait_for_timeout(300)
+        assert {g for g in gets if refetched.match(g)} <= {f"{project}/lines"}, gets
+        gets.clear()
         # deleting the line, then the point
         p.page.click(f"#features-table button[title='delete {line['id']}']")
         p.page.wait_for_function(f"!gsgeo.state.lines.some((f) => f.id === '{line['id']}')")

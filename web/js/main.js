@@ -567,13 +567,6 @@ function selectPoint(id, fly) {
   }
 }
 
-async function patchPoint(id, body) {
-  try {
-    const pt = await api("PATCH", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`, body);
-    await pointStored(pt, id);
-  } catch (exc) { fail(exc); }
-}
-
 // Undo and redo (Ctrl+Z, Ctrl+Shift+Z or Ctrl+Y) of what the operator changed, each step
 // through the API so that the store and its audit trail say what happened: {label, undo, redo}
 // of async functions, for the open project.
@@ -588,7 +581,15 @@ function remember(step) {
   undoSteps.undone = [];
 }
 
-async function undoRedo(redo) {
+let undoChain = Promise.resolve();
+
+/** Undo (or redo) the last step; presses made meanwhile wait their turn. */
+function undoRedo(redo) {
+  undoChain = undoChain.then(() => undoRedoNow(redo));
+  return undoChain;
+}
+
+async function undoRedoNow(redo) {
   if (undoSteps.project !== (state.project && state.project.id)) return;
   const from = redo ? undoSteps.undone : undoSteps.done;
   const step = from.pop();
@@ -605,14 +606,17 @@ async function undoRedo(redo) {
 async function deletePoint(id) {
   const pt = pointById(id);
   try {
-    await removePoint(id);
-    if (pt) remember({ label: `delete ${id}`, undo: () => restorePoint(pt), redo: () => removePoint(id) });
+    // remembered as soon as the server has deleted it, before the lists are redrawn
+    await removePoint(id, () => {
+      if (pt) remember({ label: `delete ${id}`, undo: () => restorePoint(pt), redo: () => removePoint(id) });
+    });
     message(`Deleted ${id}. Ctrl+Z brings it back.`);
   } catch (exc) { fail(exc); }
 }
 
-async function removePoint(id) {
+async function removePoint(id, answered = () => {}) {
   await api("DELETE", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`);
+  answered();
   await pointDeleted(id);
 }
 
@@ -656,18 +660,22 @@ function renderPointDetail() {
     h("td", { class: "num" }, fixed(rr.residual_px, 2)),
     h("td", { class: "num" }, mm(rr.residual_m)),
     h("td", {}, h("button", {
-      onclick: () => patchPoint(p.id, rr.excluded ? { restore_ray: rr.index } : { exclude_ray: rr.index }),
+      onclick: () => changePoint(p.id, rr.excluded ? { restore_ray: rr.index } : { exclude_ray: rr.index },
+        rr.excluded ? { exclude_ray: rr.index } : { restore_ray: rr.index },
+        `${rr.excluded ? "restore" : "exclude"} ray ${rr.index + 1} of ${p.id}`),
     }, rr.excluded ? "restore" : "exclude"))));
   const delBtn = h("button", { class: "danger", title: "delete (Ctrl+Z undoes)", onclick: () => deletePoint(p.id) }, "Delete");
   box.replaceChildren(
     h("div", { class: "kv" }, ...kv),
     renameRow(p.id),
+    editRow(p),
     warns.length ? h("div", { class: "warn" }, ...warns.map((w) => h("div", {}, `⚠ ${w}`))) : "",
     rays.length ? h("table", { class: "grid" }, h("thead", {}, h("tr", {}, h("th", {}, "Ray"), h("th", {}, "res px"), h("th", {}, "res mm"), h("th", {}, ""))), h("tbody", {}, ...rays)) : "",
     h("div", { class: "buttons" },
       h("button", { onclick: () => selectPoint(p.id, true) }, "Fly to"),
       h("button", { onclick: () => activate(ctx, "measure", p), title: "reopen: add rays to this point" }, "Add rays"),
       h("button", { id: "btn-rename", onclick: () => openRename(), title: "give the point another id" }, "Rename"),
+      h("button", { id: "btn-edit", onclick: () => { $("#edit-row").hidden = false; $("#edit-code").focus(); }, title: "change the code and description" }, "Edit"),
       delBtn));
 }
 
@@ -684,6 +692,48 @@ function renameRow(id) {
     h("button", { onclick: () => renamePoint(id, input.value.trim(), error) }, "Rename"), error);
 }
 
+/** The code and description of point `p`, editable (Enter or Save stores; Ctrl+Z undoes). */
+function editRow(p) {
+  const code = h("input", { id: "edit-code", maxlength: "200", value: p.code || "", autocomplete: "off" });
+  const desc = h("input", { id: "edit-description", maxlength: "2000", value: p.description || "", autocomplete: "off" });
+  const save = () => {
+    const next = { code: code.value.trim(), description: desc.value.trim() };
+    code.blur(); desc.blur(); // the keys go back to the viewer (Ctrl+Z)
+    $("#edit-row").hidden = true;
+    if (next.code === (p.code || "") && next.description === (p.description || "")) return;
+    changePoint(p.id, next, { code: p.code || "", description: p.description || "" }, `edit ${p.id}`);
+  };
+  for (const el of [code, desc]) {
+    el.addEventListener("keydown", (ev) => {
+      if (ev.key === "Enter") { ev.preventDefault(); save(); }
+      else if (ev.key === "Escape") { ev.preventDefault(); ev.stopPropagation(); $("#edit-row").hidden = true; }
+    });
+  }
+  return h("div", { id: "edit-row", class: "rename", hidden: true },
+    h("label", {}, "Code ", code), h("label", {}, " Description ", desc),
+    h("button", { onclick: save }, "Save"));
+}
+
+/** PATCH point `id` with `body` and remember the step: `back` undoes it (a PATCH too). */
+async function changePoint(id, body, back, label) {
+  try {
+    await patchStored(id, body, (pt) => {
+      remember({ label, undo: () => patchStored(pt.id, back), redo: () => patchStored(id, body) });
+    });
+  } catch (exc) { fail(exc); }
+}
+
+/** PATCH point `id` and put the server's answer into the state (the selection follows a
+ *  rename); `answered(pt)` is called with the stored point as soon as the server answers
+ *  (before the lists are redrawn). The stored point. */
+async function patchStored(id, body, answered = () => {}) {
+  const pt = await api("PATCH", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(id)}`, body);
+  answered(pt);
+  if (state.selected === id) state.selected = pt.id;
+  await pointStored(pt, id);
+  return pt;
+}
+
 function openRename() {
   $("#rename-row").hidden = false;
   $("#rename-error").textContent = "";
@@ -696,9 +746,9 @@ async function renamePoint(oldId, id, errorEl) {
   if (!id || id === oldId) { $("#rename-row").hidden = true; return; }
   if (pointById(id)) { errorEl.textContent = `${id} is taken by another point: choose another id.`; return; }
   try {
-    const pt = await api("PATCH", `/projects/${encodeURIComponent(state.project.id)}/points/${encodeURIComponent(oldId)}`, { id });
-    if (state.selected === oldId) state.selected = pt.id;
-    await pointStored(pt, oldId);
+    const pt = await patchStored(oldId, { id }, (answer) => remember({
+      label: `rename ${oldId} to ${answer.id}`, undo: () => patchStored(answer.id, { id: oldId }),
+      redo: () => patchStored(oldId, { id: answer.id }) }));
     message(`Renamed ${oldId} to ${pt.id}.`);
   } catch (exc) {
     errorEl.textContent = exc.status === 409 ? `${id} is taken: ${exc.message}` : exc.message;
