@@ -82,7 +82,12 @@ def capture(data: Path, dataset: Path, markers: list[str], shape_views: bool = F
                     cur.setdefault("match", []).append(json.loads(r.request.post_data))
                     cur.setdefault("match_answers", []).append(r.json())
                 elif r.url.endswith("/depth"):
-                    cur["depth"] = r.json()
+                    # the clicked ray's, not the navigation's (the view's centre, scale bar)
+                    px = (json.loads(r.request.post_data or "{}").get("ray") or {}).get("pixel")
+                    click = cur.get("click")
+                    if click is None or (px and abs(px[0] - click[0]) <= 1
+                                         and abs(px[1] - click[1]) <= 1):
+                        cur["depth"] = r.json()
                 elif r.url.endswith("/views"):
                     cur["views"] = r.json()
 
@@ -120,6 +125,7 @@ def capture(data: Path, dataset: Path, markers: list[str], shape_views: bool = F
                 pg.wait_for_selector("#measure-panel:not([hidden])")
                 az = float(np.degrees(np.arctan2(t.local[0] - cx, t.local[1] - cy)))
                 a = pg.evaluate(AIM_JS, [list(t.ecef), az, ELEVATION, RANGE, OFFSET])
+                cur["click"] = a["win"]
                 pg.mouse.click(a["x"], a["y"])
                 try:
                     pg.wait_for_function("gsgeo.state.measure.rays.length === 1",

@@ -110,10 +110,21 @@ def aim(page, view) -> dict:
     return a
 
 
+def depth_at(a: dict):
+    """Predicate for page.expect_response: the /depth answer of the ray through the clicked
+    pixel (not the navigation's, at the view's centre for the scale bar)."""
+    def pred(r) -> bool:
+        if not r.url.endswith("/depth"):
+            return False
+        px = ((r.request.post_data_json or {}).get("ray") or {}).get("pixel")
+        return px is not None and abs(px[0] - a["win"][0]) <= 1 and abs(px[1] - a["win"][1]) <= 1
+    return pred
+
+
 def click(page, view, n: int) -> dict:
     """Aim at the marker from `view`, click it; wait for ray n and its depth answer."""
     a = aim(page, view)
-    with page.expect_response(lambda r: r.url.endswith("/depth")) as resp:
+    with page.expect_response(depth_at(a)) as resp:
         page.mouse.click(a["x"], a["y"])
     assert resp.value.status == 200, resp.value.text()
     page.wait_for_function(f"gsgeo.state.measure.rays.length === {n}")
@@ -274,7 +285,7 @@ def test_a_click_on_the_sky_is_warned_at_once_naming_the_ray(measuring):
     az, _, _, _ = VIEWS[0]
     up_target = (truth_ecef() + 40.0 * truth_ecef() / np.linalg.norm(truth_ecef())).tolist()
     a = page.evaluate(AIM_JS, [up_target, az, -15.0, 30.0, [0.0, 0.0, 0.0]])
-    with page.expect_response(lambda r: r.url.endswith("/depth")) as resp:
+    with page.expect_response(depth_at(a)) as resp:
         page.mouse.click(a["x"], a["y"])
     assert resp.value.json()["hit"] is False, resp.value.json()
     text = "Ray 1 hits no splat (sky?) — Backspace removes it"
