@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -565,6 +565,19 @@ def _points_section(data: JSONObject) -> Section:
     return Section(f"Measured points ({len(pts) + len(ecef)})", "points", blocks)
 
 
+def _feature_table(items: list[JSONObject], columns: list[tuple[str, bool]],
+                   measures: Callable[[JSONObject], list[str]], caption: str) -> Table:
+    """Lines or polygons: id, code, point ids, then ``measures(f)`` (or why there are none)."""
+    def row(f: JSONObject) -> list[str]:
+        head = [str(f["id"]), fmt_text(f.get("code")) if f.get("code") else "",
+                ", ".join(map(str, f.get("points") or []))]
+        tail = measures(f) if "error" not in f else \
+            [str(f["error"])] + [""] * (len(columns) - len(head) - 1)
+        return head + tail
+    return _table(columns, [row(f) for f in items],
+                  ["failed" if "error" in f else "" for f in items], caption=caption)
+
+
 def _features_section(data: JSONObject) -> Section:
     """Lines (2-D and 3-D length) and polygons (area, perimeter) with their 1σ, in the grid."""
     lines = data.get("lines") or []
@@ -573,36 +586,23 @@ def _features_section(data: JSONObject) -> Section:
     blocks: list[Block] = []
     grid = "grid (the projected CRS's plane, not reduced to the ground)"
     if lines:
-        blocks.append(_table(
-            [("Line", False), ("Code", False), ("Points", False),
-             (f"length 2-D, grid [{unit}]", True), ("σ [mm]", True),
-             (f"length 3-D [{unit}]", True), ("σ [mm]", True)],
-            [[str(f["id"]), fmt_text(f.get("code")) if f.get("code") else "",
-              ", ".join(map(str, f.get("points") or [])),
-              fmt_m(f.get("length_2d")), fmt_mm(f.get("sigma_length_2d")),
-              fmt_m(f.get("length_3d")), fmt_mm(f.get("sigma_length_3d"))] if "error" not in f
-             else [str(f["id"]), fmt_text(f.get("code")) if f.get("code") else "",
-                   ", ".join(map(str, f.get("points") or [])), str(f["error"]), "", "", ""]
-             for f in lines],
-            ["failed" if "error" in f else "" for f in lines],
-            caption=f"Lengths from the points' grid coordinates: the 2-D length in the {grid}; "
-                    "the 3-D length with the heights. 1σ from the points' covariances."))
+        blocks.append(_feature_table(
+            lines, [("Line", False), ("Code", False), ("Points", False),
+                    (f"length 2-D, grid [{unit}]", True), ("σ [mm]", True),
+                    (f"length 3-D [{unit}]", True), ("σ [mm]", True)],
+            lambda f: [fmt_m(f.get("length_2d")), fmt_mm(f.get("sigma_length_2d")),
+                       fmt_m(f.get("length_3d")), fmt_mm(f.get("sigma_length_3d"))],
+            f"Lengths from the points' grid coordinates: the 2-D length in the {grid}; "
+            "the 3-D length with the heights. 1σ from the points' covariances."))
     if polys:
-        blocks.append(_table(
-            [("Polygon", False), ("Code", False), ("Points", False),
-             (f"area, grid [{unit}²]", True), ("σ [m²]", True),
-             (f"perimeter, grid [{unit}]", True), ("σ [mm]", True)],
-            [[str(f["id"]), fmt_text(f.get("code")) if f.get("code") else "",
-              ", ".join(map(str, f.get("points") or [])),
-              fmt_g(f.get("area_2d"), 6), fmt_g(f.get("sigma_area_2d"), 3),
-              fmt_m(f.get("perimeter_2d")), fmt_mm(f.get("sigma_perimeter_2d"))]
-             if "error" not in f
-             else [str(f["id"]), fmt_text(f.get("code")) if f.get("code") else "",
-                   ", ".join(map(str, f.get("points") or [])), str(f["error"]), "", "", ""]
-             for f in polys],
-            ["failed" if "error" in f else "" for f in polys],
-            caption=f"Areas and perimeters in the {grid}, from the points' E and N; 1σ from "
-                    "their covariances."))
+        blocks.append(_feature_table(
+            polys, [("Polygon", False), ("Code", False), ("Points", False),
+                    (f"area, grid [{unit}²]", True), ("σ [m²]", True),
+                    (f"perimeter, grid [{unit}]", True), ("σ [mm]", True)],
+            lambda f: [fmt_g(f.get("area_2d"), 6), fmt_g(f.get("sigma_area_2d"), 3),
+                       fmt_m(f.get("perimeter_2d")), fmt_mm(f.get("sigma_perimeter_2d"))],
+            f"Areas and perimeters in the {grid}, from the points' E and N; 1σ from "
+            "their covariances."))
     if not blocks:
         blocks.append(Notes(["No line or polygon has been measured."]))
     return Section(f"Lines and polygons ({len(lines)} / {len(polys)})", "features", blocks)
