@@ -60,3 +60,28 @@ def test_points_come_back_in_the_grid_and_bad_input_is_4xx(tmp_path):
             r = c.post("/api/projects/g/locate", json=bad)
             assert 400 <= r.status_code < 500, (bad, r.status_code, r.text)
             assert r.json().get("message"), r.text
+
+
+def test_check_points_come_with_their_ecef(tmp_path):
+    """GET .../checkpoints gives each check or control point its ECEF (the viewer draws the
+    unmeasured ones there): pyproj's EPSG:4979 -> EPSG:4978 for a point given in WGS 84, the
+    same through the grid for one given in ETRS89 / UTM 30N with an ellipsoidal height (the
+    project's default vertical), null for a point without a height."""
+    with TestClient(create_app(ServerConfig(data_dir=tmp_path / "data",
+                                            allowed_hosts={"testserver"}))) as c:
+        assert c.post("/api/projects", json={"name": "G", "id": "g", "crs": "EPSG:32630"}
+                      ).status_code == 201
+        lon, lat, h = LONDON[0], LONDON[1], 40.0
+        e, n = UTM30.transform(lon, lat)
+        r = c.post("/api/projects/g/checkpoints", json={"crs": "EPSG:4979", "role": "control",
+                                                        "points": [{"id": "C1", "x": lon, "y": lat, "z": h}]})
+        assert r.status_code == 201, r.text
+        r = c.post("/api/projects/g/checkpoints", json={"crs": "EPSG:32630", "points": [
+            {"id": "K1", "x": e, "y": n, "z": h}, {"id": "K2", "x": e, "y": n}]})
+        assert r.status_code == 201, r.text
+        got = {p["id"]: p for p in c.get("/api/projects/g/checkpoints").json()["check_points"]}
+        want = np.array(TO_ECEF.transform(lon, lat, h))
+        assert np.abs(np.array(got["C1"]["ecef"]) - want).max() < 1e-6
+        assert np.abs(np.array(got["K1"]["ecef"]) - want).max() < 1e-3
+        assert got["K2"]["ecef"] is None
+        assert (got["C1"]["role"], got["K1"]["role"]) == ("control", "check")

@@ -8,6 +8,7 @@ import json
 import shutil
 import subprocess
 
+import numpy as np
 import pytest
 
 from tests.conftest import REPO
@@ -134,3 +135,44 @@ def test_navigation_arithmetic():
         (1, "1 m"), (50, "50 m"), (2000, "2 km")]
     assert got["bars"][0]["px"] == pytest.approx(100.0)
     assert got["bars"][3] is None
+
+
+def test_pan_and_orbit_arithmetic():
+    """web/js/navmath.js: a pan moves the camera in its image plane by metres-per-pixel at the
+    grabbed depth (so a point at that depth follows the cursor, checked by projecting it by
+    hand); an orbit keeps the pivot's distance and its pixel (the camera turns as a rigid body),
+    turns the heading by the yaw, raises the elevation by the pitch, and stops it at 2 and 88
+    degrees."""
+    src = (f"import * as N from '{(WEB_JS / 'navmath.js').as_uri()}';\n"
+           """const s = Math.SQRT1_2;
+    // camera 10 m south of and 10 m above the pivot (origin), looking at it; z is up
+    const pose = { position: [0, -10, 10], direction: [0, s, -s], up: [0, s, s] };
+    const orbit = (yaw, pitch) => N.orbitedPose(pose, [0, 0, 0], [0, 0, 1], yaw, pitch);
+    console.log(JSON.stringify({
+      mpp: N.metresPerPixel(10, Math.PI / 2, 500),
+      pan: N.pannedPosition([0, 0, 0], [1, 0, 0], [0, 0, 1], 30, -20, 0.04),
+      turn: orbit(Math.PI / 2, 0),
+      raise: orbit(0, 10 * Math.PI / 180),
+      low: orbit(0, -80 * Math.PI / 180),
+      high: orbit(0, 80 * Math.PI / 180),
+    }));""")
+    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    assert got["mpp"] == pytest.approx(2 * 10 / 500)
+    # a point 10 m ahead (camera at origin looking along +y, right +x, up +z) at pixel offset 0;
+    # after dragging 30 px right and 20 px up it must appear 30 px right, 20 px up: the camera
+    # moved 1.2 m left and 0.8 m down
+    assert got["pan"] == pytest.approx([-1.2, 0, -0.8])
+    for key in ("turn", "raise", "low", "high"):
+        q = got[key]
+        pos, d = np.asarray(q["position"]), np.asarray(q["direction"])
+        assert np.linalg.norm(pos) == pytest.approx(np.sqrt(200))  # the pivot's distance kept
+        assert np.cross(d, -pos / np.linalg.norm(pos)) == pytest.approx(np.zeros(3), abs=1e-12)  # still at it
+        assert np.dot(d, q["up"]) == pytest.approx(0, abs=1e-12)
+    assert got["turn"]["position"] == pytest.approx([10, 0, 10])  # a quarter turn anticlockwise
+    elev = {k: np.degrees(np.arcsin(got[k]["position"][2] / np.sqrt(200))) for k in ("raise", "low", "high")}
+    assert elev["raise"] == pytest.approx(55)
+    assert elev["low"] == pytest.approx(2)
+    assert elev["high"] == pytest.approx(88)

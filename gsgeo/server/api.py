@@ -411,7 +411,10 @@ def check_point_json(c: CheckPointRecord) -> dict[str, Any]:
 
 @router.get("/projects/{pid}/checkpoints", summary="List check points (as given, in their CRS)")
 def list_check_points(pid: PID, request: Request) -> dict[str, Any]:
-    return {"check_points": [check_point_json(c) for c in svc(request).list_check_points(pid)]}
+    """Each point as given, with ``ecef``: its position (m) in ECEF on the project's source
+    CRS, the frame a georeferenced scene is drawn in (null without a height)."""
+    return {"check_points": [check_point_json(c) | {"ecef": e}
+                             for c, e in svc(request).check_points_ecef(pid)]}
 
 
 @router.post("/projects/{pid}/checkpoints", status_code=201,

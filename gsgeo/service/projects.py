@@ -980,6 +980,31 @@ class Projects(BuildingService):
             self._project(tx, pid)
             return tx.list_check_points(pid)
 
+    def check_points_ecef(self, pid: str) -> list[tuple[CheckPointRecord, list[float] | None]]:
+        """The project's check and control points, each with its position in ECEF (m) on the
+        project's source CRS (the frame the viewer renders a georeferenced scene in), through
+        the same path as control in a georeference fit; None for a point without height or
+        whose CRS has no transformation here."""
+        from gsgeo.georef.control import control_ecef
+
+        with self.store.transaction(write=False) as tx:
+            p = self._project(tx, pid)
+            cps = tx.list_check_points(pid)
+        settings = solve_settings(p.settings(), self.data_dir)
+        out: list[list[float] | None] = [None] * len(cps)
+        for crs in sorted({c.crs for c in cps}):
+            idx = [i for i, c in enumerate(cps) if c.crs == crs and c.z is not None]
+            if not idx:
+                continue
+            try:
+                ecef = control_ecef([[cps[i].x, cps[i].y, cps[i].z] for i in idx], [crs] * len(idx),
+                                    settings, [cps[i].id for i in idx])
+            except GsgeoError:
+                continue  # e.g. a CRS with no transformation here: those points are not drawn
+            for i, e in zip(idx, ecef.tolist(), strict=True):
+                out[i] = e
+        return list(zip(cps, out, strict=True))
+
     def add_check_points(self, pid: str, rows: list[CheckPointRow], crs: str, *,
                          role: str = "check", source: str = "", replace: bool = False,
                          overwrite: Collection[str] = ()) -> int:

@@ -191,7 +191,17 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
     assert rows.count() == len(CONTROL)
     assert sorted(p.locator("#georef-table tbody tr").evaluate_all(
         "rs => rs.map(r => r.dataset.id)")) == sorted(CONTROL)
-    assert p.locator("#georef-table tbody tr td:nth-child(2)").all_inner_texts() == ["✓"] * 6
+    assert p.locator("#georef-table tbody tr td:nth-child(3)").all_inner_texts() == ["✓"] * 6
+    # each control point with its coordinates as given; its id looks at it (the view's centre)
+    c3 = lon_lat_h(CONTROL["C3"])
+    text = p.inner_text("#georef-table tbody tr[data-id='C3'] td:nth-child(2)")
+    assert [float(v) for v in text.split(" (")[0].split(", ")] == pytest.approx(list(c3), abs=1e-9), text
+    assert text.endswith("(EPSG:4979)"), text
+    p.click("#georef-table tbody tr[data-id='C3'] button.known")
+    centre = p.evaluate("[gsgeo.viewer.scene.canvas.clientWidth / 2,"
+                        " gsgeo.viewer.scene.canvas.clientHeight / 2]")
+    c3_ecef = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True).transform(*c3)
+    assert window_of(p, c3_ecef) == pytest.approx(centre, abs=0.5)
     outliers = p.evaluate("gsgeo.state.georef.fit.outliers")
     assert outliers == [BLUNDER], outliers
     bad = p.locator(f"#georef-table tbody tr[data-id='{BLUNDER}']")
@@ -200,7 +210,7 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
     red = p.evaluate(f"""getComputedStyle(document.querySelector(
         "#georef-table tbody tr[data-id='{BLUNDER}'] td")).color""")
     assert red == "rgb(255, 123, 114)", red
-    d_bad = float(bad.locator("td:nth-child(6)").inner_text())  # 3-D residual, mm
+    d_bad = float(bad.locator("td:nth-child(7)").inner_text())  # 3-D residual, mm
     assert d_bad > 100.0, d_bad
     assert BLUNDER in p.inner_text("#georef-outliers")
     shot(p, "01_outlier")
@@ -214,7 +224,7 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
                         " && document.querySelector('#georef-summary')", timeout=30_000)
     assert "excluded" in p.locator(f"#georef-table tbody tr[data-id='{BLUNDER}']").get_attribute("class")
     d_good = [float(t) for t in p.locator(
-        "#georef-table tbody tr:not(.excluded) td:nth-child(6)").all_inner_texts()]
+        "#georef-table tbody tr:not(.excluded) td:nth-child(7)").all_inner_texts()]
     assert len(d_good) == 5 and max(d_good) < 30.0, d_good  # mm
     summary = p.inner_text("#georef-summary")
     scale = float(re.search(r"scale × ([\d.]+) \(-6\d{5}\.\d ± [\d.]+ ppm\)", summary).group(1))

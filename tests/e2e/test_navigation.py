@@ -161,3 +161,128 @@ def test_cursor_coordinates_scale_bar_and_north_arrow(page):
     p.keyboard.up("h")
     assert p.evaluate(AIDS_JS) == shown
     assert not p.errors, p.errors
+
+
+def azimuth_deg(cam, point) -> float:
+    """Azimuth (deg, clockwise from north) of the camera seen from `point` (ECEF)."""
+    lon, lat, _ = TO_GEO.transform(*map(float, point))
+    lon, lat = np.radians(lon), np.radians(lat)
+    east = np.array([-np.sin(lon), np.cos(lon), 0.0])
+    north = np.array([-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)])
+    v = np.asarray(cam) - np.asarray(point)
+    return float(np.degrees(np.arctan2(v @ east, v @ north)))
+
+
+def elevation_deg(cam, point) -> float:
+    """Elevation (deg) of the camera seen from `point` (ECEF), against the ellipsoid normal."""
+    lon, lat, _ = TO_GEO.transform(*map(float, point))
+    lon, lat = np.radians(lon), np.radians(lat)
+    up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+    v = np.asarray(cam) - np.asarray(point)
+    return float(np.degrees(np.arcsin(v @ up / np.linalg.norm(v))))
+
+
+def drag(p, start, end, button="left", modifier=None) -> None:
+    """A real mouse drag from `start` to `end` (page px) in three moves; waits until the
+    navigation has put the camera where the drag takes it."""
+    drags = p.evaluate("gsgeo.navigation.drags")
+    p.mouse.move(*start)
+    if modifier:
+        p.keyboard.down(modifier)
+    p.mouse.down(button=button)
+    for k in (1, 2, 3):
+        p.mouse.move(start[0] + (end[0] - start[0]) * k / 3, start[1] + (end[1] - start[1]) * k / 3)
+    p.mouse.up(button=button)
+    if modifier:
+        p.keyboard.up(modifier)
+    p.wait_for_function(f"gsgeo.navigation.drags > {drags} && !gsgeo.navigation.drag"
+                        " && gsgeo.navigation.grabbing === 0")
+
+
+def test_drags_pan_and_orbit_about_the_splat_under_the_cursor_and_arrows_move(page):
+    """Left drag: the ground grabbed follows the cursor (within 3 px), the camera's direction
+    kept. Right drag: the pivot stays at its pixel (3 px) and at its distance (1 cm); seen from
+    the pivot, the camera's azimuth turns by 0.25 deg a pixel sideways and its elevation by 0.25
+    deg a pixel up or down, never below 2 deg (the horizon: not below the ground). A press
+    moved less than 5 px moves nothing. Arrow keys: the view's centre moves a tenth of the
+    view's height; with Shift the heading turns 5 deg about it."""
+    p = page
+    g1 = truth("G1")
+    aim = p.evaluate(AIM_JS, [list(g1.ecef), 200.0, 45.0, 12.0, [0.0, 0.0, 0.0]])
+    start = (round(aim["x"]), round(aim["y"]))
+    grabbed = np.asarray(p.evaluate(GROUND_UNDER_JS, [*start, list(g1.ecef)]))
+    before = p.evaluate(POSE_JS)
+
+    # a click's jitter is not a drag
+    p.mouse.move(*start)
+    p.mouse.down()
+    p.mouse.move(start[0] + 2, start[1] + 1)
+    p.mouse.up()
+    assert np.allclose(p.evaluate(POSE_JS)["position"], before["position"], atol=1e-9)
+
+    # left drag: pan
+    end = (start[0] + 150, start[1] + 60)
+    drag(p, start, end)
+    pose = p.evaluate(POSE_JS)
+    assert np.allclose(pose["direction"], before["direction"], atol=1e-9)  # moved, not turned
+    win = p.evaluate(WINDOW_JS, grabbed.tolist())
+    assert np.hypot(win[0] - end[0], win[1] - end[1]) < 3, (win, end)
+    assert height(pose["position"]) > height(g1.ecef)
+
+    # right drag: orbit about the splat under the cursor (G1's ground, now at `end`)
+    pivot = np.asarray(p.evaluate(GROUND_UNDER_JS, [*end, list(g1.ecef)]))
+    cam0 = np.asarray(pose["position"])
+    e0 = elevation_deg(cam0, pivot)
+    drag(p, end, (end[0] + 120, end[1] - 40), button="right")
+    turned = p.evaluate(POSE_JS)
+    cam1 = np.asarray(turned["position"])
+    win = p.evaluate(WINDOW_JS, pivot.tolist())
+    assert np.hypot(win[0] - end[0], win[1] - end[1]) < 3, (win, end)
+    assert np.linalg.norm(cam1 - pivot) == pytest.approx(np.linalg.norm(cam0 - pivot), abs=0.01)
+    da = (azimuth_deg(cam1, pivot) - azimuth_deg(cam0, pivot) + 180) % 360 - 180
+    assert da == pytest.approx(120 * 0.25, abs=0.2), da
+    assert elevation_deg(cam1, pivot) == pytest.approx(e0 - 40 * 0.25, abs=0.2)
+    # a tilt far past the horizon stops above it (Ctrl + left drag orbits too)
+    drag(p, end, (end[0], end[1] - 400), modifier="Control")
+    low = np.asarray(p.evaluate(POSE_JS)["position"])
+    assert elevation_deg(low, pivot) == pytest.approx(2.0, abs=0.2)
+    assert height(low) > height(g1.ecef)
+
+    # arrow keys
+    p.evaluate(AIM_JS, [list(g1.ecef), 200.0, 45.0, 12.0, [0.0, 0.0, 0.0]])
+    wait_idle(p)
+    w, h = p.evaluate("[gsgeo.viewer.scene.canvas.clientWidth, gsgeo.viewer.scene.canvas.clientHeight]")
+    at0 = np.asarray(p.evaluate(WINDOW_JS, list(g1.ecef)))
+    keys = p.evaluate("gsgeo.navigation.keys")
+    p.keyboard.press("ArrowRight")  # the camera goes right: the scene moves left
+    p.wait_for_function(f"gsgeo.navigation.keys > {keys} && !gsgeo.navigation.busy")
+    at1 = np.asarray(p.evaluate(WINDOW_JS, list(g1.ecef)))
+    assert at1 - at0 == pytest.approx([-h / 10, 0.0], abs=3), (at0, at1, w, h)
+    heading = p.evaluate("gsgeo.viewer.camera.heading")
+    p.keyboard.press("Shift+ArrowLeft")
+    p.wait_for_function(f"gsgeo.navigation.keys > {keys + 1} && !gsgeo.navigation.busy")
+    dh = (np.degrees(p.evaluate("gsgeo.viewer.camera.heading") - heading) + 180) % 360 - 180
+    assert dh == pytest.approx(-5.0, abs=0.3), dh
+    assert not p.errors, p.errors
+
+
+def test_idle_means_no_frame(page):
+    """Once the view has settled after a move (no frame for 3 s), nothing changing for 30 s (the
+    mouse resting on the scene, the scene loaded) draws not one WebGL frame (gsgeo.renderer
+    counts every frame, web/js/render.js). The issue saw a frame of every splat every 6 s."""
+    p = page
+    g1 = truth("G1")
+    aim = p.evaluate(AIM_JS, [list(g1.ecef), 150.0, 40.0, 15.0, [0.0, 0.0, 0.0]])
+    p.mouse.move(aim["x"] + 40, aim["y"] + 30)
+    wait_idle(p)
+    p.wait_for_function("!gsgeo.renderer.busy()", polling=250)
+    # settled: the view's last frames drawn (the cursor's coordinates and the scale bar asked
+    # and shown), no frame for 3 s
+    p.wait_for_function("""() => { const f = gsgeo.renderer.frames, now = performance.now();
+        if (window.lastFrames !== f) { window.lastFrames = f; window.lastFrameAt = now; }
+        return now - window.lastFrameAt > 3000; }""", polling=250)
+    frames = p.evaluate("[gsgeo.renderer.frames, gsgeo.renderer.framesOfAll]")
+    p.wait_for_timeout(30_000)
+    after = p.evaluate("[gsgeo.renderer.frames, gsgeo.renderer.framesOfAll]")
+    assert after == frames, (frames, after)
+    assert not p.errors, p.errors

@@ -87,6 +87,70 @@ def measure_rays(page, marker: str, views) -> None:
     page.wait_for_function("gsgeo.state.measure.solution !== null", timeout=30_000)
 
 
+#: Every marker of a point drawn on the overlay (the points', the known points'), its window
+#: position by Cesium's own projection (SceneTransforms, not the overlay's arithmetic) and the
+#: centroid of the pixels of its colour the overlay canvas holds within 8 px of it; markers
+#: closer than 14 px to another of the same colour are left out (their pixels mix).
+MARKERS_DRAWN_JS = """() => { const C = gsgeo.Cesium, o = gsgeo.draw.overlay, scene = gsgeo.viewer.scene;
+  const img = o.ctx.getImageData(0, 0, o.canvas.width, o.canvas.height), dpr = window.devicePixelRatio || 1;
+  const all = [...o.groups.values()].flat().filter((s) => s.marker && s.id).map((s) => {
+    const css = s.color && s.color !== 'transparent' ? s.color : s.ring;
+    const w = C.SceneTransforms.worldToWindowCoordinates(scene, new C.Cartesian3(...s.position));
+    return { id: s.id, css, win: w ? [w.x, w.y] : null };
+  }).filter((m) => m.win && m.win[0] > 10 && m.win[1] > 10 && m.win[0] < o.canvas.width / dpr - 10
+    && m.win[1] < o.canvas.height / dpr - 10);
+  return all.filter((m) => !all.some((n) => n !== m && n.css === m.css
+      && Math.hypot(n.win[0] - m.win[0], n.win[1] - m.win[1]) < 14)).map((m) => {
+    const c = C.Color.fromCssColorString(m.css);
+    const want = [c.red * 255, c.green * 255, c.blue * 255];
+    let sx = 0, sy = 0, n = 0;
+    for (let y = Math.floor(m.win[1] - 8); y <= m.win[1] + 8; y++) {
+      for (let x = Math.floor(m.win[0] - 8); x <= m.win[0] + 8; x++) {
+        const i = 4 * (Math.round(y * dpr) * img.width + Math.round(x * dpr));
+        const d = Math.max(...want.map((v, k) => Math.abs(img.data[i + k] - v)));
+        if (img.data[i + 3] > 250 && d < 24) { sx += x + 0.5; sy += y + 0.5; n++; }
+      }
+    }
+    return { ...m, n, centroid: n ? [sx / n, sy / n] : null };
+  }); }"""
+#: The midpoint of every line segment of the overlay in view (Cesium's projection) and whether the
+#: overlay canvas has a drawn pixel within 1 px of it.
+LINES_DRAWN_JS = """() => { const C = gsgeo.Cesium, o = gsgeo.draw.overlay, scene = gsgeo.viewer.scene;
+  const img = o.ctx.getImageData(0, 0, o.canvas.width, o.canvas.height), dpr = window.devicePixelRatio || 1;
+  const out = [];
+  for (const s of [...o.groups.values()].flat()) {
+    if (s.marker || !s.points) continue;
+    for (let k = 0; k + 1 < s.points.length; k++) {
+      const a = s.points[k], b = s.points[k + 1];
+      const mid = new C.Cartesian3((a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2);
+      const w = C.SceneTransforms.worldToWindowCoordinates(scene, mid);
+      const W = o.canvas.width / dpr, H = o.canvas.height / dpr;
+      if (!w || w.x < 2 || w.y < 2 || w.x > W - 2 || w.y > H - 2) continue;
+      let hit = false;
+      for (let dy = -1; dy <= 1; dy++) for (let dx = -1; dx <= 1; dx++) {
+        const i = 4 * (Math.round((w.y + dy) * dpr) * img.width + Math.round((w.x + dx) * dpr));
+        if (img.data[i + 3] > 0) hit = true;
+      }
+      out.push({ win: [w.x, w.y], hit });
+    }
+  }
+  return out; }"""
+#: Window position (CSS px) of an ECEF point, by Cesium's projection.
+WINDOW_JS = """(p) => { const C = gsgeo.Cesium;
+  const w = C.SceneTransforms.worldToWindowCoordinates(gsgeo.viewer.scene, new C.Cartesian3(...p));
+  return w ? [w.x, w.y] : null; }"""
+#: Whether the overlay was last drawn for the camera's present view.
+OVERLAY_CURRENT_JS = """() => { const o = gsgeo.draw.overlay, m = gsgeo.viewer.camera.viewMatrix;
+  return !!o.shown && o.shown.matrix.every((v, i) => Math.abs(v - m[i]) < 1e-9); }"""
+#: Keep the overlay canvas' pixels in the page as `name` (an RGBA array).
+KEEP_PIXELS_JS = """(name) => { const o = gsgeo.draw.overlay;
+  window[name] = o.ctx.getImageData(0, 0, o.canvas.width, o.canvas.height).data; }"""
+#: Whether the overlay canvas' pixels are those kept as `name`.
+SAME_PIXELS_JS = """(name) => { const o = gsgeo.draw.overlay, b = window[name];
+  const d = o.ctx.getImageData(0, 0, o.canvas.width, o.canvas.height).data;
+  return d.length === b.length && d.every((v, i) => v === b[i]); }"""
+
+
 def overlay_count(page, group: str) -> int:
     return page.evaluate(f"(gsgeo.draw.overlay.groups.get('{group}') || []).length")
 
@@ -133,6 +197,17 @@ def test_id_prompt_rename_overlay_ellipsoid_accuracy(server, browser):
     errors: list[str] = []
     page = open_page(browser, f"{server}/?project={PID}", errors)
     try:
+        # the check points not measured yet are drawn with their ids where they are: within
+        # 1 px of the truth's pixel (the marker's position, projected by Cesium)
+        page.evaluate(AIM_JS, [list(map(float, enu_to_ecef(MARKERS["roof_ne"]))), 40.0, 50.0, 12.0,
+                               [-0.8, -0.8, 0.0]])
+        page.wait_for_function(OVERLAY_CURRENT_JS)
+        known = {m["id"]: m for m in page.evaluate(MARKERS_DRAWN_JS)}
+        for k, marker in (("K1", "roof_ne"), ("K2", "ground_sw")):
+            truth = page.evaluate(WINDOW_JS, list(map(float, enu_to_ecef(MARKERS[marker]))))
+            assert known[k]["centroid"] == pytest.approx(truth, abs=1.0), (known[k], truth)
+            assert known[k]["css"] == "rgb(227,107,255)", known[k]  # a check point's colour
+
         # Enter asks for the id, offering the check point at the solution; Esc goes back
         measure_rays(page, "roof_ne", VIEWPOINTS[:3])
         page.keyboard.press("Enter")
@@ -215,6 +290,39 @@ def test_id_prompt_rename_overlay_ellipsoid_accuracy(server, browser):
         assert "horiz" not in summary and " H " in summary and " V " not in summary, summary
         note = page.inner_text("#accuracy-note")
         assert note.startswith("Millimetres") and "metres" not in note[len("Millimetres"):], note
+
+        # after a camera move every marker and line of the overlay is drawn where the camera
+        # now sees its point: within 1 px of Cesium's projection
+        page.evaluate(AIM_JS, [list(map(float, enu_to_ecef(MARKERS["roof_ne"]))), 75.0, 40.0, 11.0,
+                               [0.3, 0.2, 0.0]])
+        page.wait_for_function(OVERLAY_CURRENT_JS)
+        drawn = page.evaluate(MARKERS_DRAWN_JS)
+        assert {"K1", "K2"} <= {m["id"] for m in drawn}, drawn
+        for m in drawn:
+            assert m["centroid"] is not None and m["n"] >= 12, m
+            assert abs(m["centroid"][0] - m["win"][0]) <= 1 and abs(m["centroid"][1] - m["win"][1]) <= 1, m
+        lines = page.evaluate(LINES_DRAWN_JS)
+        assert len(lines) >= 2 and all(seg["hit"] for seg in lines), lines
+
+        # a deleted point leaves nothing drawn: the overlay is again what it was before it
+        page.keyboard.press("Escape")  # nothing selected
+        page.wait_for_function("gsgeo.state.selected === null")
+        view = [list(map(float, enu_to_ecef(MARKERS["roof_ne"]))), 25.0, 50.0, 12.0, [0.0, 0.0, 0.0]]
+        page.evaluate(AIM_JS, view)
+        page.wait_for_function(OVERLAY_CURRENT_JS)
+        page.evaluate(KEEP_PIXELS_JS, "beforeGone")
+        measure_rays(page, "ground_sw", VIEWPOINTS[2:4])
+        page.keyboard.press("Enter")
+        page.wait_for_selector("#id-prompt:not([hidden])")
+        page.fill("#id-prompt-input", "GONE")
+        page.keyboard.press("Enter")
+        page.wait_for_function("gsgeo.state.selected === 'GONE'")
+        page.evaluate(AIM_JS, view)
+        page.wait_for_function(OVERLAY_CURRENT_JS)
+        assert not page.evaluate(SAME_PIXELS_JS, "beforeGone")  # GONE, its rays and ellipsoid drawn
+        page.click("#point-detail button[title^='delete']")
+        page.wait_for_function("!gsgeo.state.points.some((p) => p.id === 'GONE')")
+        page.wait_for_function(SAME_PIXELS_JS, arg="beforeGone", timeout=10_000)
         assert errors == []
     finally:
         page.close()

@@ -14,6 +14,9 @@ export const COLORS = {
   point: Cesium.Color.fromCssColorString("#f5b700"),
   selected: Cesium.Color.fromCssColorString("#3ea6ff"),
   solution: Cesium.Color.fromCssColorString("#00e5ff"),
+  // known points not measured yet: control (georeference) and check (accuracy)
+  control: Cesium.Color.fromCssColorString("#ff8c1a"),
+  check: Cesium.Color.fromCssColorString("#e36bff"),
   line: Cesium.Color.fromCssColorString("#3fb950"),
   polygon: Cesium.Color.fromCssColorString("#d2a8ff"),
   draft: Cesium.Color.fromCssColorString("#ffffff"),
@@ -68,6 +71,14 @@ export class Drawer {
   /** A point marker labelled with its id `id` (overlay.markers(group) lists them). */
   marker(group, id, position, color, size = 9) {
     this.overlay.marker(group, position, { id, size, color: color.toCssColorString(), outline: 1.5, label: id });
+  }
+
+  /** A known point not measured yet (a control or check point) at `position` (rendered ECEF):
+   *  a ring of `size` px in its role's colour, labelled with its id. */
+  known(group, id, position, role, size = 14) {
+    const css = (role === "control" ? COLORS.control : COLORS.check).toCssColorString();
+    this.overlay.marker(group, position, { id, size, color: "transparent", outline: 2.5, ring: css, label: id,
+      labelColor: css, font: "bold 12px sans-serif" });
   }
 
   /** A ring of `size` px around `position` (rendered ECEF): the solution of the point measured. */

@@ -78,8 +78,12 @@ export function georefPanel(ctx) {
     const outlier = r && r.outlier;
     const cls = excluded ? "excluded" : (outlier ? "outlier" : (c.measured ? "" : "unmeasured"));
     const d3 = r ? Math.hypot(r.dE, r.dN, r.dH) : null;
+    const known = (state.checkPointList || []).find((k) => k.id === c.id);
     return h("tr", { "data-id": c.id, class: cls, title: outlier ? `${c.id} fails the blunder test (w ${fixed(r.w, 2)}, p ${fixed(r.p, 4)})` : "" },
-      h("td", {}, `${c.id}${outlier ? " ⚑" : ""}`),
+      h("td", {}, h("button", { class: "known", "data-id": c.id, disabled: !(known && known.ecef),
+        title: known ? `${ctx.knownText(known)}: look at it` : "", onclick: () => ctx.viewKnown(c.id) },
+      `${c.id}${outlier ? " ⚑" : ""}`)),
+      h("td", { class: "num coords" }, known ? ctx.knownText(known) : "—"),
       h("td", {}, c.measured ? "✓" : "not measured"),
       h("td", { class: "num" }, r ? mm(r.dE) : "—"),
       h("td", { class: "num" }, r ? mm(r.dN) : "—"),
@@ -125,7 +129,7 @@ export function georefPanel(ctx) {
     const control = st ? st.control : [];
     const byId = new Map(((g.fit && g.fit.control) || []).map((r) => [r.id, r]));
     const rows = control.map((c) => residualRow(c, byId.get(c.id)));
-    $("#georef-table tbody").replaceChildren(...(rows.length ? rows : [h("tr", {}, h("td", { colspan: 8, class: "muted" },
+    $("#georef-table tbody").replaceChildren(...(rows.length ? rows : [h("tr", {}, h("td", { colspan: 9, class: "muted" },
       "No control points: import them below (Check points, role control), then measure each target with the control point's id."))]));
     const n = measured().length;
     const box = $("#georef-fit");

@@ -504,7 +504,7 @@ const ctx = {
   modeChanged: () => drawSelected(),
 };
 
-const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged });
+const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged, viewKnown, knownText });
 const buildings = buildingsPanel({ state, draw, modelMatrix, message, fail });
 installGuide(ctx, draw.overlay);
 const navigation = installNavigation(ctx, { overview });
@@ -839,6 +839,7 @@ async function importCheckPoints(ev) {
     const cps = await api("GET", `/projects/${encodeURIComponent(state.project.id)}/checkpoints`);
     state.checkPoints = cps.check_points.length;
     state.checkPointList = cps.check_points;
+    drawKnown();
     await refreshAccuracy();
   } catch (exc) { fail(exc); }
 }
@@ -856,11 +857,13 @@ async function loadAccuracy() {
       h("td", {}, d.id), h("td", { class: "num" }, mm(d.dE)), h("td", { class: "num" }, mm(d.dN)),
       h("td", { class: "num" }, mm(d.dH)), h("td", { class: "num" }, mm(d.d3D))));
     const c = acc.counts;
+    const unmeasured = c.check_points_not_measured.length
+      ? h("div", { class: "known-list", id: "accuracy-unmeasured" }, "Not measured (look at): ",
+        ...knownButtons(c.check_points_not_measured)) : "";
     if (!c.matched) {
       box.replaceChildren(h("p", { class: "note", id: "accuracy-summary" },
-        `${c.check_points} check points (${c.check_points_not_measured.slice(0, 12).join(", ")}`
-        + `${c.check_points_not_measured.length > 12 ? ", …" : ""}); none measured yet. Give a measured point `
-        + "the ID of a check point (asked at Enter while measuring) to compare it."));
+        `${c.check_points} check points; none measured yet. Give a measured point `
+        + "the ID of a check point (asked at Enter while measuring) to compare it."), unmeasured);
       return;
     }
     // H is the height here as everywhere in the viewer: the API's RMSE_H (horizontal) is shown
@@ -872,8 +875,7 @@ async function loadAccuracy() {
       h("div", { class: "solution", id: "accuracy-summary" },
         `RMSE E ${mm(s.RMSE_E)}  N ${mm(s.RMSE_N)}  EN ${mm(s.RMSE_H)}  H ${mm(s.RMSE_V)}  3D ${mm(s.RMSE_3D)} mm\n`
         + `ME   E ${mm(s.ME_E)}  N ${mm(s.ME_N)}  H ${mm(s.ME_V)} mm;  SD E ${mm(s.SD_E)}  N ${mm(s.SD_N)}  H ${mm(s.SD_V)} mm\n`
-        + `${c.matched} of ${c.check_points} check points measured`
-        + (c.check_points_not_measured.length ? ` (not measured: ${c.check_points_not_measured.join(", ")})` : "")),
+        + `${c.matched} of ${c.check_points} check points measured`), unmeasured,
       h("p", { class: "note", id: "accuracy-note" }, `Millimetres; differences are measured minus check; EN is the `
         + `horizontal (2-D) RMSE. Heights: ${acc.heights}.`));
   } catch (exc) {
@@ -907,7 +909,50 @@ function renderAll() {
   updateStatus();
 }
 
+/** The project's check and control points not measured yet (no point has their id), drawn
+ *  where the server put them in ECEF (GET .../checkpoints: the frame of a georeferenced scene's
+ *  tiles, the measured points' frame), under the tileset's model matrix as the points are. */
+function drawKnown() {
+  draw.clear("known");
+  const measured = new Set(state.points.map((p) => p.id));
+  const mmNow = modelMatrix();
+  for (const c of state.checkPointList || []) {
+    if (c.ecef && !measured.has(c.id)) draw.known("known", c.id, applyPoint(mmNow, c.ecef), c.role);
+  }
+}
+
+/** Look at known point `id` (a check or control point) from 45 degrees above, at the
+ *  camera's heading, from a range of 12 m (less in a smaller scene). */
+function viewKnown(id) {
+  const c = (state.checkPointList || []).find((k) => k.id === id);
+  if (!c || !c.ecef) { message(`${id} has no position to look at (no height, or its CRS has no transformation here).`, true); return; }
+  const t = state.tileset;
+  const range = Math.min(12, Math.max(2, t ? t.boundingSphere.radius : 12));
+  const cam = viewer.camera;
+  cam.cancelFlight();
+  cam.lookAt(new Cesium.Cartesian3(...applyPoint(modelMatrix(), c.ecef)), new Cesium.HeadingPitchRange(cam.heading, Cesium.Math.toRadians(-45), range));
+  cam.lookAtTransform(Cesium.Matrix4.IDENTITY);
+  message(`Looking at ${c.role === "control" ? "control" : "check"} point ${id}.`);
+}
+
+/** The known point's coordinates as given, in its CRS's axis order: "545012.345, 258012.345,
+ *  12.345 (EPSG:27700)" (up to 9 decimals: degrees keep theirs). */
+function knownText(c) {
+  const f = (v) => (v === null || v === undefined ? "—" : String(Number(Number(v).toFixed(9))));
+  return `${f(c.x)}, ${f(c.y)}, ${f(c.z)} (${c.crs})`;
+}
+
+/** Buttons for known points `ids`: each flies to a view of its point. */
+function knownButtons(ids) {
+  return ids.map((id) => {
+    const c = (state.checkPointList || []).find((k) => k.id === id);
+    return h("button", { class: "known", "data-id": id, title: c ? `${knownText(c)}: look at it` : id,
+      disabled: !(c && c.ecef), onclick: () => viewKnown(id) }, id);
+  });
+}
+
 function redrawAll() {
+  drawKnown();
   drawSelected();
   drawFeatures();
   buildings.redraw();
@@ -992,6 +1037,7 @@ document.addEventListener("keydown", (ev) => {
   else if (key === "g" || key === "G") { georef.toggle(); ev.preventDefault(); }
   else if (key === "v" || key === "V") { nextView(ctx); ev.preventDefault(); }
   else if (key === "Home") { navigation.home(); ev.preventDefault(); }
+  else if (key.startsWith("Arrow")) { navigation.keyMove(key.slice(5).toLowerCase(), ev.shiftKey); ev.preventDefault(); }
   else if (key === "+" || key === "=" || key === "-") {
     const c = viewer.scene.canvas;
     navigation.zoom([c.clientWidth / 2, c.clientHeight / 2], key === "-" ? -1 : 1);

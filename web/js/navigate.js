@@ -3,7 +3,11 @@
 // Here the wheel, + and - zoom about the splat under the cursor (or the view's centre), found
 // by the server from the splats' depth (POST /api/scenes/{scene}/depth): the camera moves
 // along the ray through that pixel, so the point stays under the cursor, and stops short of
-// the surface (never through it). Home returns to the scene's overview. A north arrow, a
+// the surface (never through it). A left drag pans: the camera moves in its image plane so
+// the splat grabbed stays under the cursor. A right or middle drag (or a left drag with Shift
+// or Ctrl) orbits about the splat under the cursor where the drag began, never below the
+// pivot's horizon. Arrow keys pan by a tenth of the view, with Shift they orbit by 5 degrees
+// about the splat at the view's centre. Home returns to the scene's overview. A north arrow, a
 // scale bar (at the depth of the view's centre) and the cursor's coordinates in the project's
 // grid (POST /api/projects/{pid}/locate, from the splat under the cursor) follow the view.
 //
@@ -11,12 +15,15 @@
 // the canvas' top-left corner.
 
 import { api } from "./api.js";
-import { MAX_RANGE_RADII, scaleBar, zoomedPosition, notches } from "./navmath.js";
+import { DRAG_START_PX, MAX_RANGE_RADII, MIN_GAP_M, ORBIT_DEG_PER_PX, metresPerPixel, notches, orbitedPose,
+  pannedPosition, scaleBar, zoomedPosition } from "./navmath.js";
 import { captureRay } from "./rays.js";
 
 const Cesium = window.Cesium;
 /** The cursor rests this long (ms) before its coordinates are asked. */
 const CURSOR_REST_MS = 120;
+/** Degrees an arrow key with Shift orbits. */
+const ORBIT_KEY_DEG = 5;
 
 /** Install the navigation on the viewer of `ctx` ({viewer, state, modelMatrix, still}).
  *  `overview()` puts the camera at the scene's overview. Returns {home, zoom, cursor} for
@@ -27,7 +34,13 @@ export function installNavigation(ctx, { overview }) {
   const canvas = scene.canvas;
   const sscc = scene.screenSpaceCameraController;
   sscc.zoomEventTypes = [Cesium.CameraEventType.PINCH]; // the wheel is ours
-  const nav = { wheels: 0, zooms: 0, busy: false, cursor: null, centreDepth: null };
+  // so are the drags: Cesium's aim at the globe under the scene (a turn of 143 degrees and a
+  // move of 180 m for a drag of 250 px)
+  sscc.enableRotate = false;
+  sscc.enableTranslate = false;
+  sscc.enableTilt = false;
+  sscc.enableLook = false;
+  const nav = { wheels: 0, zooms: 0, drags: 0, keys: 0, busy: false, cursor: null, centreDepth: null, drag: null, grabbing: 0 };
   let queued = 0;
   let at = null;
   let anchor = null; // {pos, pose, point}: the point zoomed about from `pos` at pose `pose`
@@ -129,6 +142,129 @@ export function installNavigation(ctx, { overview }) {
     zoom([ev.clientX - r.left, ev.clientY - r.top], notches(ev));
   }, { passive: false });
 
+  const cameraPose = () => {
+    const c = viewer.camera;
+    const arr = (v) => [v.x, v.y, v.z];
+    return { position: arr(c.positionWC), direction: arr(c.directionWC), up: arr(c.upWC), right: arr(c.rightWC) };
+  };
+  const heightOf = (p) => Cesium.Cartographic.fromCartesian(new Cesium.Cartesian3(...p)).height;
+  const verticalAt = (p) => {
+    const n = Cesium.Ellipsoid.WGS84.geodeticSurfaceNormal(new Cesium.Cartesian3(...p), new Cesium.Cartesian3());
+    return [n.x, n.y, n.z];
+  };
+
+  function setPose(pose) {
+    const cam = viewer.camera;
+    cam.cancelFlight();
+    cam.setView({ destination: new Cesium.Cartesian3(...pose.position),
+      orientation: { direction: new Cesium.Cartesian3(...pose.direction), up: new Cesium.Cartesian3(...pose.up) } });
+  }
+
+  /** Pan from pose `p0` by (dx, dy) CSS px at view depth `depth` (m); not below `floor` (m,
+   *  ellipsoidal height). Whether it moved. */
+  function panFrom(p0, dx, dy, depth, floor) {
+    const mpp = metresPerPixel(depth, viewer.camera.frustum.fovy, canvas.clientHeight);
+    const next = pannedPosition(p0.position, p0.right, p0.up, dx, dy, mpp);
+    if (heightOf(next) < floor) return false;
+    setPose({ ...p0, position: next });
+    return true;
+  }
+
+  /** View depth (m, along the camera's direction) of `point` seen from pose `p`. */
+  const depthOf = (p, point) => p.direction.reduce((a, d, k) => a + d * (point[k] - p.position[k]), 0);
+
+  // drags: pan (left) and orbit (right, middle, or left with Shift or Ctrl)
+  canvas.addEventListener("contextmenu", (ev) => ev.preventDefault());
+  canvas.addEventListener("pointerdown", (ev) => {
+    if (nav.drag || ev.button > 2) return;
+    const r = canvas.getBoundingClientRect();
+    const pos = [ev.clientX - r.left, ev.clientY - r.top];
+    const orbit = ev.button !== 0 || ev.shiftKey || ev.ctrlKey;
+    const p0 = cameraPose();
+    const drag = { id: ev.pointerId, pos, orbit, p0, last: [0, 0], moving: false, point: null, grabbed: false };
+    nav.drag = drag;
+  });
+  /** The splat grabbed (pan) or the pivot (orbit), asked once the press is a drag (a click
+   *  asks nothing); a pan uses the view centre's depth until the answer comes. */
+  async function grab(drag) {
+    nav.grabbing++;
+    try {
+      let point = await pointUnder(drag.pos);
+      if (!point && drag.orbit) point = await pointUnder([canvas.clientWidth / 2, canvas.clientHeight / 2]);
+      if (!point && drag.orbit) point = fallbackPoint(drag.pos);
+      drag.point = point;
+      drag.grabbed = true;
+      moveDrag(drag); // also when the button is up already: the drag's whole move
+    } finally {
+      nav.grabbing--;
+    }
+  }
+  window.addEventListener("pointermove", (ev) => {
+    const drag = nav.drag;
+    if (!drag || ev.pointerId !== drag.id) return;
+    const r = canvas.getBoundingClientRect();
+    const d = [ev.clientX - r.left - drag.pos[0], ev.clientY - r.top - drag.pos[1]];
+    if (!drag.moving && Math.hypot(...d) < DRAG_START_PX) return;
+    if (!drag.moving) {
+      drag.moving = true;
+      canvas.setPointerCapture?.(ev.pointerId);
+      grab(drag);
+    }
+    drag.last = d;
+    moveDrag(drag);
+  });
+  const endDrag = (ev) => {
+    const drag = nav.drag;
+    if (!drag || ev.pointerId !== drag.id) return;
+    if (drag.moving) nav.drags++;
+    nav.drag = null;
+  };
+  window.addEventListener("pointerup", endDrag);
+  window.addEventListener("pointercancel", endDrag);
+
+  /** Put the camera where the drag so far takes it from where the drag began. */
+  function moveDrag(drag) {
+    const [dx, dy] = drag.last;
+    const p0 = drag.p0;
+    if (drag.orbit) {
+      if (!drag.point) return; // the pivot is not known yet: the move waits for it
+      const rad = (ORBIT_DEG_PER_PX * Math.PI) / 180;
+      setPose(orbitedPose(p0, drag.point, verticalAt(drag.point), -dx * rad, dy * rad));
+      return;
+    }
+    const depth = drag.point ? depthOf(p0, drag.point) : nav.centreDepth;
+    if (!(depth > 0)) return;
+    panFrom(p0, dx, dy, depth, Math.min(heightOf(p0.position), drag.point ? heightOf(drag.point) + MIN_GAP_M : Infinity));
+  }
+
+  /** A key's move: `dir` one of "left", "right", "up", "down"; `orbit` turns about the splat
+   *  at the view's centre by ORBIT_KEY_DEG instead of panning a tenth of the view. */
+  async function keyMove(dir, orbit) {
+    if (nav.busy) return;
+    nav.busy = true;
+    try {
+      const centre = [canvas.clientWidth / 2, canvas.clientHeight / 2];
+      const point = await pointUnder(centre);
+      const p0 = cameraPose();
+      const [dx, dy] = { left: [-1, 0], right: [1, 0], up: [0, -1], down: [0, 1] }[dir];
+      if (orbit) {
+        const pivot = point || fallbackPoint(centre);
+        if (!pivot) return;
+        const rad = (ORBIT_KEY_DEG * Math.PI) / 180;
+        setPose(orbitedPose(p0, pivot, verticalAt(pivot), -dx * rad, dy * rad));
+      } else {
+        const depth = point ? depthOf(p0, point) : nav.centreDepth;
+        if (!(depth > 0)) return;
+        // the view moves a tenth of its height: the arrow says which way the camera goes
+        const step = canvas.clientHeight / 10;
+        panFrom(p0, -dx * step, -dy * step, depth, Math.min(heightOf(p0.position), point ? heightOf(point) + MIN_GAP_M : Infinity));
+      }
+      nav.keys++;
+    } finally {
+      nav.busy = false;
+    }
+  }
+
   // the cursor's coordinates, once it rests
   const coords = document.getElementById("cursor-coords");
   let rest = null;
@@ -203,6 +339,7 @@ export function installNavigation(ctx, { overview }) {
 
   nav.home = () => { overview(); };
   nav.zoom = zoom;
+  nav.keyMove = keyMove;
   nav.showCursor = showCursor;
   window.gsgeo.navigation = nav;
   return nav;

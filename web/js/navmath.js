@@ -36,3 +36,63 @@ export function scaleBar(metresPerPx, maxPx = 120) {
   const m = [5, 2, 1].map((k) => k * p).find((x) => x <= most);
   return { metres: m, px: m / metresPerPx, label: m >= 1000 ? `${m / 1000} km` : m >= 1 ? `${m} m` : `${Math.round(m * 100)} cm` };
 }
+
+/** A drag shorter than this (CSS px) is a click, not a move (Cesium's click tolerance). */
+export const DRAG_START_PX = 5;
+/** Orbit: degrees of turn per CSS pixel of drag. */
+export const ORBIT_DEG_PER_PX = 0.25;
+/** Orbit: the camera stays between these elevations (deg) seen from the pivot: above the
+ *  ground, and short of straight overhead (where heading is undefined). */
+export const ORBIT_MIN_ELEVATION_DEG = 2;
+export const ORBIT_MAX_ELEVATION_DEG = 88;
+
+const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+const add = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+const scale = (a, s) => [a[0] * s, a[1] * s, a[2] * s];
+const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+const unit = (a) => scale(a, 1 / Math.hypot(...a));
+
+/** Vector `v` turned by `angle` (rad) about unit axis `k` (Rodrigues). */
+export function rotate(v, k, angle) {
+  const c = Math.cos(angle);
+  const s = Math.sin(angle);
+  return add(add(scale(v, c), scale(cross(k, v), s)), scale(k, dot(k, v) * (1 - c)));
+}
+
+/** The camera position (ECEF, m) after a pan by a drag of (dx, dy) CSS px (x right, y down)
+ *  from position `p0` with unit `right` and `up` vectors, `metresPerPx` at the grabbed point's
+ *  depth: the camera moves in its image plane so that the grabbed point follows the cursor. */
+export function pannedPosition(p0, right, up, dx, dy, metresPerPx) {
+  return add(p0, add(scale(right, -dx * metresPerPx), scale(up, dy * metresPerPx)));
+}
+
+/** Metres per CSS pixel at view depth `depth` (m) for vertical field of view `fovy` (rad) on a
+ *  canvas `heightPx` CSS px high. */
+export function metresPerPixel(depth, fovy, heightPx) {
+  return (2 * Math.tan(fovy / 2) * depth) / heightPx;
+}
+
+/** The camera pose after orbiting about `pivot` (ECEF, m) with local vertical `vertical`
+ *  (unit, the ellipsoid normal there): `pitch` (rad, positive raises the camera) about the
+ *  level axis through the pivot square to the camera's bearing, limited so the camera stays
+ *  between ORBIT_MIN/MAX_ELEVATION_DEG as seen from the pivot, then `yaw` (rad) about the
+ *  vertical. `pose` is {position, direction, up} (ECEF; direction and up unit). The camera
+ *  turns as a rigid body about the pivot, so the pivot stays at its pixel. */
+export function orbitedPose(pose, pivot, vertical, yaw, pitch) {
+  const rel0 = sub(pose.position, pivot);
+  const e0 = Math.asin(Math.max(-1, Math.min(1, dot(unit(rel0), vertical))));
+  const lo = (ORBIT_MIN_ELEVATION_DEG * Math.PI) / 180;
+  const hi = (ORBIT_MAX_ELEVATION_DEG * Math.PI) / 180;
+  // within the limits; a camera already beyond one may only come back
+  const a = pitch > 0 ? Math.min(pitch, Math.max(0, hi - e0)) : Math.max(pitch, Math.min(0, lo - e0));
+  const level = cross(rel0, vertical); // rotating rel0 about this raises it
+  const k = Math.hypot(...level) > 1e-12 ? unit(level) : unit(cross(pose.direction, pose.up));
+  let rel = rotate(rel0, k, a);
+  let dir = rotate(pose.direction, k, a);
+  let up = rotate(pose.up, k, a);
+  rel = rotate(rel, vertical, yaw);
+  dir = rotate(dir, vertical, yaw);
+  up = rotate(up, vertical, yaw);
+  return { position: add(pivot, rel), direction: dir, up, pitch: a };
+}
