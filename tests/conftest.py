@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import hypothesis_profiles  # noqa: F401  (loads the Hypothesis profile: GSGEO_HYPOTHESIS=ci|long)
@@ -59,10 +58,15 @@ SLOW_MODULES = (
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The browser tests (tests/e2e/) first: the worker that takes them starts with them,
-    the other one with the other modules, at a lower priority (pytest_runtest_setup). Then
-    the SLOW_MODULES, slowest first, then the rest. The order within a module is kept.
-    The scheduler hands modules out in this order (pytest_xdist_make_scheduler)."""
+    """The browser tests (tests/e2e/) first: the worker that takes them starts with them
+    (the longest part, about 560 s), the other one with the other modules. Then the
+    SLOW_MODULES, slowest first, then the rest. The order within a module is kept. The
+    scheduler hands modules out in this order (pytest_xdist_make_scheduler).
+
+    Both workers run at the same priority. With the other worker at nice 19 (kept from the
+    SwiftShader days, when the browser beside a busy worker took 2-4 times its time) the
+    browser tests were no faster under llvmpipe (578 s against 544 s beside an equal worker)
+    and the run took 802 s instead of 715-730 s (2026-11-28)."""
     slow = {name: rank for rank, name in enumerate(SLOW_MODULES)}
 
     def rank(item: pytest.Item) -> tuple[int, int]:
@@ -71,27 +75,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return (1, slow.get(item.path.name, len(slow)))
 
     items.sort(key=rank)
-
-
-#: Whether this process has chosen its priority (pytest_runtest_setup).
-_PRIORITY_SET = False
-#: The nice value of the worker that does not run the browser tests.
-OTHER_WORKER_NICE = 19
-
-
-def pytest_runtest_setup(item: pytest.Item) -> None:
-    """On two workers, the one that starts with something other than the browser tests (which
-    come first) runs at nice OTHER_WORKER_NICE for the rest of the session, its servers and
-    PostgreSQL too. The software renderer draws every frame on both cores: beside a busy
-    worker of equal priority the browser tests took 2-4 times their time alone (SwiftShader:
-    the building tool 270 s instead of 70 s), more than the other worker gained. At a lower
-    priority the other worker takes the cores the browser leaves idle."""
-    global _PRIORITY_SET
-    if _PRIORITY_SET:
-        return
-    _PRIORITY_SET = True
-    if os.environ.get("PYTEST_XDIST_WORKER") and "e2e" not in item.path.parts:
-        os.nice(OTHER_WORKER_NICE)
 
 
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
@@ -107,8 +90,7 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     from xdist.scheduler import LoadScopeScheduling
 
     # xdist's default reorders the modules by their number of tests, which put the browser
-    # tests (30 tests) behind a dozen modules: both workers then started with another module,
-    # both lowered their priority, and the run ended on whichever long module came last.
+    # tests (30 tests) behind a dozen modules and the long modules anywhere.
     config.option.loadscopereorder = False
 
     class ModulesWithTheBrowserTestsTogether(LoadScopeScheduling):
