@@ -25,7 +25,7 @@ const idle = {
     } else if (!state.project) {
       text = "Create or open a project (top bar) to store points. M measures a point, ? shows help.";
     } else {
-      text = "M (or Measure point) starts a point; a click on a point marker selects it. L line, P polygon, B building, G georeference, ? help. Drag moves, wheel zooms, Ctrl + drag tilts.";
+      text = "M (or Measure point) starts a point; a click on a point marker selects it. L line, P polygon, B building, G georeference, ? help. Drag moves, right drag orbits, wheel zooms, Home goes back.";
     }
     return { text, className: "" };
   },
