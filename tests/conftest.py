@@ -77,6 +77,17 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items.sort(key=rank)
 
 
+@pytest.hookimpl(trylast=True)  # after the module's own fixtures (its pages) are gone
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> None:
+    """After the last browser test of this process, Chromium and Playwright are stopped
+    (tests/e2e/shared.py: stop_browser): the modules after them on the same worker call
+    asyncio.run(), which Playwright's running loop refuses."""
+    if "e2e" in item.path.parts and (nextitem is None or "e2e" not in nextitem.path.parts):
+        from tests.e2e.shared import stop_browser
+
+        stop_browser()
+
+
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     """pytest-xdist's scheduler for the suite (pyproject.toml's addopts: two workers): every
     test module whole on one worker (its module fixtures, servers and demo builds among them,

@@ -997,7 +997,8 @@ class Projects(BuildingService):
             if not idx:
                 continue
             try:
-                ecef = control_ecef([[cps[i].x, cps[i].y, cps[i].z] for i in idx], [crs] * len(idx),
+                xyz = np.array([[cps[i].x, cps[i].y, cps[i].z] for i in idx], dtype=float)
+                ecef = control_ecef(xyz, [crs] * len(idx),
                                     settings, [cps[i].id for i in idx])
             except GsgeoError:
                 continue  # e.g. a CRS with no transformation here: those points are not drawn
@@ -1193,4 +1194,40 @@ def feature_measures(f: FeatureRecord, records: dict[str, JSONObject | None],
         m = fn(xyz, cov, f.point_ids, **units)
     except GsgeoError as exc:
         return {"error": str(exc)}
-    return json_ready(vars(m))
+    out = dict(vars(m))
+    if g is not None:
+        out.update(ground_measures(out, recs, project.crs or ""))
+    return json_ready(out)
+
+
+def ground_measures(m: JSONObject, recs: Sequence[JSONObject], crs: str) -> JSONObject:
+    """The grid lengths, perimeters and areas of ``m`` reduced to the ground: divided by the
+    combined scale factor (point scale factor times elevation factor, gsgeo.crs.grid.
+    scale_factors) at the mean longitude, latitude and ellipsoidal height of the feature's
+    points (``recs``, point-schema records), areas by its square; with the factors used.
+    Empty when the points carry no WGS 84 position."""
+    from gsgeo.crs.grid import scale_factors
+
+    try:
+        llh = np.array([[r["lon"], r["lat"], r["h_wgs84"]] for r in recs], dtype=float)
+    except (KeyError, TypeError):
+        return {}
+    if not np.all(np.isfinite(llh)):
+        return {}
+    try:
+        lon, lat, h = llh.mean(axis=0)
+        f = scale_factors(lon, lat, h, crs)
+    except GsgeoError:
+        return {}
+    csf = float(f.combined[0])
+    out: JSONObject = {"scale_factor": float(f.point[0]), "elevation_factor": float(f.elevation[0]),
+                       "combined_scale_factor": csf}
+    for key in ("length_2d", "sigma_length_2d", "perimeter_2d", "sigma_perimeter_2d"):
+        v = m.get(key)
+        if isinstance(v, (int, float)):
+            out[f"{key}_ground"] = v / csf
+    for key in ("area_2d", "sigma_area_2d"):
+        v = m.get(key)
+        if isinstance(v, (int, float)):
+            out[f"{key}_ground"] = v / csf**2
+    return out

@@ -30,22 +30,41 @@ def require_browser() -> None:
         pytest.skip("cesium is not installed in web/node_modules (run npm ci in web/)")
 
 
+#: The running Playwright (sync API) and its Chromium, while the browser tests run.
+_PLAYWRIGHT: list = []
+
+
+def stop_browser() -> None:
+    """Close the session's Chromium and stop Playwright (idempotent). The browser tests'
+    worker calls it after the last of them (tests/conftest.py): Playwright's sync API keeps an
+    asyncio loop marked running in the main thread, and the modules the worker runs next call
+    asyncio.run()."""
+    while _PLAYWRIGHT:
+        pw, b = _PLAYWRIGHT.pop()
+        try:
+            b.close()
+        finally:
+            pw.stop()
+
+
 @pytest.fixture(scope="session")
 def browser() -> Iterator:
-    """Headless Chromium for the whole session, drawing with the software renderer GL
-    (workplace.py); tests open and close pages."""
+    """Headless Chromium for the browser tests, drawing with the software renderer GL
+    (workplace.py); tests open and close pages. Stopped after the last browser test."""
     require_browser()
     from playwright.sync_api import sync_playwright
 
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+    pw = sync_playwright().start()
+    b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+    _PLAYWRIGHT.append((pw, b))
+    try:
         renderer = webgl_renderer(b)
         if GL not in renderer.lower():
-            b.close()
             pytest.fail(f"Chromium draws with {renderer!r}, not {GL} (GSGEO_TEST_GL): for llvmpipe, "
                         "Debian's libegl-mesa0 and libgl1-mesa-dri (scripts/install.sh --test)")
         yield b
-        b.close()
+    finally:
+        stop_browser()
 
 
 def webgl_renderer(browser) -> str:
