@@ -366,4 +366,61 @@ def test_lines_and_polygons_are_reported_with_grid_measures(svc, monkeypatch):
     assert "Lines and polygons (1 / 1)" in flat
     assert "L1" in flat and "kerb" in flat and "C0, C1, C2" in flat
     assert fmt_m(l2) in flat and fmt_m(l3) in flat and fmt_m(perimeter) in flat
-    assert "length 2-D, grid" in flat and "not reduced to the ground" in flat
+    assert "length 2-D, grid" in flat and "length 2-D, ground" in flat
+    # ground = grid / (k R / (R + h)) at the mean position, by hand from PROJ's factors
+    llh = np.array([[rec[k]["lon"], rec[k]["lat"], rec[k]["h_wgs84"]] for k in ("C0", "C1", "C2")])
+    lon, lat, h = llh.mean(axis=0)
+    k = pyproj.Proj(CRS).get_factors(lon, lat).meridional_scale
+    a, e2 = 6378137.0, 0.00669437999014
+    m_rad = a * (1 - e2) / (1 - e2 * math.sin(math.radians(lat)) ** 2) ** 1.5
+    n_rad = a / math.sqrt(1 - e2 * math.sin(math.radians(lat)) ** 2)
+    r = math.sqrt(m_rad * n_rad)
+    csf = k * r / (r + h)
+    assert got_line["combined_scale_factor"] == pytest.approx(csf, abs=1e-9)
+    assert got_line["length_2d_ground"] == pytest.approx(l2 / csf, abs=1e-6)
+    assert fmt_m(l2 / csf) in flat and f"{csf:.8f}" in flat
+    assert got_poly["area_2d_ground"] == pytest.approx(
+        area / got_poly["combined_scale_factor"] ** 2, rel=1e-9)
+    assert abs(l2 / csf - l2) > 1e-4  # UTM 30N at 0.13 W: k = 0.99987; the two differ
+
+
+def test_buildings_are_reported_and_long_audit_values_wrap_inside_the_page(tmp_path):
+    """The gable house of building_helpers captured as B1: its row in the report (roof type,
+    volume within 3σ of the truth, 720 m³, with its σ); an audit entry with a long description
+    (a word of 150 characters in its JSON) wraps: WeasyPrint lays every box out inside the
+    page."""
+    from building_helpers import CRS as HOUSE_CRS
+    from building_helpers import GROUND, ROOFS, VOLUME, house_points
+
+    svc = open_projects(tmp_path)
+    try:
+        svc.create_project(name="House", id="house", crs=HOUSE_CRS)
+        for q in house_points():
+            svc.add_point("house", q | {"description": "a long description " + "x" * 150
+                                        if q["id"] == "E1" else ""})
+        svc.add_building("house", {"id": "B1", "roofs": ROOFS, "ground": GROUND})
+        data = report_data(svc, "house")
+    finally:
+        svc.store.close()
+    (b,) = data["buildings"]
+    ms = b["measures"]
+    assert ms["roof_type"] == "gable"
+    assert abs(ms["volume"] - VOLUME) < 3 * ms["sigma_volume"]
+    pdf = render(data, "pdf")
+    reader = pypdf.PdfReader(io.BytesIO(pdf))
+    flat = re.sub(r"\s+", " ", " ".join(p.extract_text() for p in reader.pages))
+    assert "Buildings (1)" in flat and "gable" in flat
+    assert f"{ms['volume']:.6g} ± {ms['sigma_volume']:.3g}" in flat
+    # laid out by WeasyPrint (the PDF's engine): no box reaches past its page's right edge
+    import weasyprint
+
+    from gsgeo.report.content import build_report
+    from gsgeo.report.html import render_html
+
+    doc = weasyprint.HTML(string=render_html(build_report(data))).render()
+    for page in doc.pages:
+        box = page._page_box
+        right = box.margin_width()
+        over = [(type(b).__name__, round(b.position_x + b.margin_width(), 1))
+                for b in box.descendants() if b.position_x + b.margin_width() > right + 0.5]
+        assert not over, over[:5]

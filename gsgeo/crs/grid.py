@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
+from pyproj.exceptions import ProjError
 
 from gsgeo.crs.confidence import ellipse_95, ellipsoid_axes_95
 from gsgeo.crs.frames import ecef_to_geodetic, enu_rotation, geodetic_jacobian
@@ -454,3 +455,40 @@ def _compound_id(g: GridCRS) -> str:
 
 def _source(text: str) -> SourceCRS:
     return source_crs(text or "EPSG:4978")
+
+
+@dataclass(frozen=True)
+class ScaleFactors:
+    """Scale between grid and ground at points (arrays of N): ``point`` the projection's point
+    scale factor k (from PROJ's ``get_factors``: the square root of the areal scale, which is
+    k in every direction for a conformal projection and an average over directions for
+    others), ``elevation`` R / (R + h) with R the Gaussian mean
+    radius sqrt(M N) of the WGS 84 ellipsoid at the latitude and h the ellipsoidal height (m),
+    ``combined`` their product. A ground distance is the grid distance divided by ``combined``;
+    a ground area the grid area divided by its square."""
+
+    point: np.ndarray
+    elevation: np.ndarray
+    combined: np.ndarray
+
+
+def scale_factors(lon: ArrayLike, lat: ArrayLike, h: ArrayLike, crs: str) -> ScaleFactors:
+    """Grid-to-ground scale factors of projected CRS ``crs`` at WGS 84 longitudes, latitudes
+    (degrees) and ellipsoidal heights (m). The datum's own shift (metres) changes k by about
+    1e-9, below anything a survey reads."""
+    g = grid_crs(crs)
+    lon_a, lat_a, h_a = (np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (lon, lat, h))
+    proj = projection(g.horizontal)
+    try:
+        fac = proj.get_factors(lon_a, lat_a, errcheck=True)
+    except ProjError as exc:
+        raise CRSError(f"{crs}: no scale factors at these points ({exc})") from exc
+    # the square root of the areal scale: k itself where the projection is conformal (areal =
+    # k squared), an average over directions where it is not
+    k = np.sqrt(np.asarray(fac.areal_scale, dtype=np.float64))
+    a, f = 6378137.0, 1.0 / 298.257223563
+    e2 = f * (2.0 - f)
+    s2 = np.sin(np.radians(lat_a)) ** 2
+    radius = a * np.sqrt(1.0 - e2) / (1.0 - e2 * s2)  # sqrt(M N)
+    elev = radius / (radius + h_a)
+    return ScaleFactors(point=k, elevation=elev, combined=k * elev)

@@ -64,7 +64,8 @@ class Facts:
 @dataclass
 class Table:
     """A table of text cells; ``numeric`` columns are right-aligned; ``row_classes`` mark
-    rows ("outlier", "excluded", "failed" or "")."""
+    rows ("outlier", "excluded", "failed" or ""); ``anywhere`` columns (long machine text:
+    JSON) may break between any two characters to stay inside the page."""
 
     columns: list[str]
     rows: list[list[str]]
@@ -72,6 +73,7 @@ class Table:
     row_classes: list[str] = field(default_factory=list)
     caption: str = ""
     kind: str = "table"
+    anywhere: list[bool] = field(default_factory=list)
 
 
 @dataclass
@@ -584,35 +586,92 @@ def _features_section(data: JSONObject) -> Section:
     polys = data.get("polygons") or []
     unit = _unit(data)
     blocks: list[Block] = []
-    grid = "grid (the projected CRS's plane, not reduced to the ground)"
+    grid = "grid (the projected CRS's plane)"
+    ground = ("Ground values are the grid values divided by the combined scale factor (CSF: "
+              "the projection's point scale factor times the elevation factor R / (R + h), at "
+              "the mean position and ellipsoidal height of the feature's points), areas by its "
+              "square.")
+
+    def csf(f: JSONObject) -> str:
+        v = f.get("combined_scale_factor")
+        return f"{v:.8f}" if isinstance(v, (int, float)) else DASH
+
     if lines:
         blocks.append(_feature_table(
             lines, [("Line", False), ("Code", False), ("Points", False),
                     (f"length 2-D, grid [{unit}]", True), ("σ [mm]", True),
-                    (f"length 3-D [{unit}]", True), ("σ [mm]", True)],
+                    ("length 2-D, ground [m]", True), (f"length 3-D [{unit}]", True),
+                    ("σ [mm]", True), ("CSF", True)],
             lambda f: [fmt_m(f.get("length_2d")), fmt_mm(f.get("sigma_length_2d")),
-                       fmt_m(f.get("length_3d")), fmt_mm(f.get("sigma_length_3d"))],
-            f"Lengths from the points' grid coordinates: the 2-D length in the {grid}; "
-            "the 3-D length with the heights. 1σ from the points' covariances."))
+                       fmt_m(f.get("length_2d_ground")),
+                       fmt_m(f.get("length_3d")), fmt_mm(f.get("sigma_length_3d")), csf(f)],
+            f"Lengths from the points' grid coordinates: the 2-D length in the {grid} and "
+            "on the ground; the 3-D length with the heights. 1σ from the points' "
+            f"covariances. {ground}"))
     if polys:
         blocks.append(_feature_table(
             polys, [("Polygon", False), ("Code", False), ("Points", False),
                     (f"area, grid [{unit}²]", True), ("σ [m²]", True),
-                    (f"perimeter, grid [{unit}]", True), ("σ [mm]", True)],
+                    ("area, ground [m²]", True), (f"perimeter, grid [{unit}]", True),
+                    ("σ [mm]", True), ("perimeter, ground [m]", True), ("CSF", True)],
             lambda f: [fmt_g(f.get("area_2d"), 6), fmt_g(f.get("sigma_area_2d"), 3),
-                       fmt_m(f.get("perimeter_2d")), fmt_mm(f.get("sigma_perimeter_2d"))],
-            f"Areas and perimeters in the {grid}, from the points' E and N; 1σ from "
-            "their covariances."))
+                       fmt_g(f.get("area_2d_ground"), 6),
+                       fmt_m(f.get("perimeter_2d")), fmt_mm(f.get("sigma_perimeter_2d")),
+                       fmt_m(f.get("perimeter_2d_ground")), csf(f)],
+            f"Areas and perimeters in the {grid} and on the ground, from the points' E and "
+            f"N; 1σ from their covariances. {ground}"))
     if not blocks:
         blocks.append(Notes(["No line or polygon has been measured."]))
     return Section(f"Lines and polygons ({len(lines)} / {len(polys)})", "features", blocks)
 
 
+def _with_sigma(ms: JSONObject, key: str, fmt: Callable[[JSON], str], sigma_fmt: Callable[[JSON], str]
+                ) -> str:
+    """``ms[key]`` with its ``sigma_<key>`` beside it: "12.345 ± 4.2"."""
+    v = fmt(ms.get(key))
+    sig = ms.get(f"sigma_{key}")
+    return v if sig is None or v == DASH else f"{v} ± {sigma_fmt(sig)}"
+
+
+def _buildings_section(data: JSONObject) -> Section:
+    """LoD2 buildings with their measures and 1σ (gsgeo.buildings.measures)."""
+    rows = data.get("buildings") or []
+    if not rows:
+        return Section("Buildings (0)", "buildings", [Notes(["No building has been captured."])])
+    unit = _unit(data)
+    unit = {"metre": "m", "foot": "ft", "US survey foot": "ftUS"}.get(unit, unit)
+
+    def row(b: JSONObject) -> list[str]:
+        if b.get("error"):
+            return [str(b["id"]), DASH, str(b["error"]), "", "", "", "", ""]
+        got = b.get("measures")
+        ms: JSONObject = got if isinstance(got, dict) else {}
+        warn = "; ".join(map(str, b.get("warnings") or []))
+        return [str(b["id"]), fmt_text(ms.get("roof_type")),
+                _with_sigma(ms, "volume", lambda v: fmt_g(v, 6), lambda v: fmt_g(v, 3)),
+                _with_sigma(ms, "footprint_area", lambda v: fmt_g(v, 6), lambda v: fmt_g(v, 3)),
+                _with_sigma(ms, "eaves_height", fmt_m, fmt_mm),
+                _with_sigma(ms, "ridge_height", fmt_m, fmt_mm),
+                _with_sigma(ms, "measured_height", fmt_m, fmt_mm), warn]
+    table = _table(
+        [("Building", False), ("Roof", False), (f"volume [{unit}³] ± σ", True),
+         (f"footprint, grid [{unit}²] ± σ", True), (f"eaves H [{unit}] ± σ [mm]", True),
+         (f"ridge H [{unit}] ± σ [mm]", True), ("height [m] ± σ [mm]", True),
+         ("Warnings", False)],
+        [row(b) for b in rows], ["failed" if b.get("error") else "" for b in rows],
+        caption="LoD2 models adjusted from measured roof corners: volume down to the ground "
+                "given, footprint in the grid plane, eaves and ridge heights in the project's "
+                "height system, height of the ridge above the ground; 1σ propagated from the "
+                "points' covariances through the adjustment.")
+    return Section(f"Buildings ({len(rows)})", "buildings", [table])
+
+
 def _values(v: JSON, limit: int = 160) -> str:
-    """Before/after values of an audit entry as compact JSON text, cut at ``limit``."""
+    """Before/after values of an audit entry as JSON text, cut at ``limit``; a space after
+    each comma and colon, where a long value may wrap."""
     if v is None:
         return DASH
-    text = json.dumps(v, separators=(",", ":"), ensure_ascii=False, default=str)
+    text = json.dumps(v, separators=(", ", ": "), ensure_ascii=False, default=str)
     return text if len(text) <= limit else text[:limit - 1] + "…"
 
 
@@ -628,14 +687,16 @@ def _audit_section(data: JSONObject) -> Section:
         [[str(a), str(n)] for a, n in sorted(counts.items())],
         caption=f"{total} changes recorded in all, by action.")]
     shown = f"The latest {len(entries)} of {total}" if total > len(entries) else "All"
-    blocks.append(_table(
+    trail = _table(
         [("When (UTC)", False), ("Who", False), ("Action", False), ("What", False),
          ("Before", False), ("After", False)],
         [[str(e.get("at")), str(e.get("user")), str(e.get("action")),
           f"{e.get('kind')} {e.get('item')}" if e.get("item") else str(e.get("kind")),
           _values(e.get("before")), _values(e.get("after"))] for e in entries],
         caption=f"{shown} changes, newest first; the whole trail is at "
-                "GET /api/projects/{id}/audit."))
+                "GET /api/projects/{id}/audit.")
+    trail.anywhere = [False, False, False, False, True, True]
+    blocks.append(trail)
     return Section(f"Audit trail ({total})", "audit", blocks)
 
 
@@ -673,5 +734,5 @@ def build_report(data: JSONObject) -> Report:
         sections=_set_long_tables([
             _project_section(data), _frames_section(data), _georef_section(data),
             _accuracy_section(data), _points_section(data), _features_section(data),
-            _audit_section(data)]),
+            _buildings_section(data), _audit_section(data)]),
     )

@@ -210,6 +210,20 @@ def _feature_rows(svc: Projects, pid: str, kind: str) -> list[JSONObject]:
             for f, measures in svc.list_features(pid, kind)]
 
 
+def _building_rows(svc: Projects, pid: str) -> list[JSONObject]:
+    """The project's LoD2 buildings: id, roof type, measures with their 1σ (grid metres,
+    gsgeo.buildings.measures) and warnings, or the error that keeps one from being built."""
+    out: list[JSONObject] = []
+    for b in svc.list_buildings(pid):
+        if b.get("error"):
+            out.append({"id": b["id"], "error": b["error"]})
+            continue
+        ms = b.get("measures")
+        out.append({"id": b["id"], "measures": ms if isinstance(ms, dict) else {},
+                    "warnings": b.get("warnings") or []})
+    return out
+
+
 #: How many of the latest audit entries the report lists (the counts cover all of them).
 AUDIT_ROWS = 50
 
@@ -245,6 +259,7 @@ def report_data(svc: Projects, pid: str, *, generated_at: str | None = None,
                          "control": len(control)},
         "lines": _feature_rows(svc, pid, "line"),
         "polygons": _feature_rows(svc, pid, "polygon"),
+        "buildings": _building_rows(svc, pid),
         # the latest changes (newest first) and how many of each action there are in all
         "audit": audit_page(svc.store, pid, limit=AUDIT_ROWS),
     }

@@ -23,19 +23,23 @@ export function area(x) {
   return Math.abs(x) < 1e5 ? `${x.toFixed(3)} m²` : `${(x / 1e4).toFixed(4)} ha`;
 }
 
-/** The measures of a line or polygon as the server gives them (lengths in m, areas in m²),
- *  each with its sigma: "length 3d 5.000 m ± 1.2 mm, ...". */
+/** The measures of a line or polygon as the server gives them (lengths in m, areas in m²,
+ *  1σ beside each): grid values (in the CRS's plane), their ground values (divided by the
+ *  combined scale factor, areas by its square) and that factor. "2-D grid 12.345 m ± 1.2 mm,
+ *  ground 12.347 m · 3-D 12.400 m ± 1.5 mm · CSF 0.99985127". */
 export function measuresText(ms) {
   if (!ms) return "—";
   if (ms.error) return ms.error;
+  const num = (v) => typeof v === "number" && Number.isFinite(v);
+  const withSig = (v, sig, fmt) => `${fmt(v)}${num(sig) ? ` ± ${fmt(sig)}` : ""}`;
   const parts = [];
-  for (const [k, v] of Object.entries(ms)) {
-    if (typeof v !== "number" || k.startsWith("sigma") || k === "n_points") continue;
-    const sig = ms[`sigma_${k}`];
-    const val = k.includes("area") ? area(v) : (/length|perimeter/.test(k) ? length(v) : fixed(v));
-    parts.push(`${k.replace(/_/g, " ")} ${val}${typeof sig === "number" ? ` ± ${k.includes("area") ? area(sig) : length(sig)}` : ""}`);
-  }
-  return parts.join(", ") || "—";
+  const groundOf = (k, fmt) => (num(ms[`${k}_ground`]) ? `, ground ${fmt(ms[`${k}_ground`])}` : "");
+  if (num(ms.length_2d)) parts.push(`2-D grid ${withSig(ms.length_2d, ms.sigma_length_2d, length)}${groundOf("length_2d", length)}`);
+  if (num(ms.length_3d)) parts.push(`3-D ${withSig(ms.length_3d, ms.sigma_length_3d, length)}`);
+  if (num(ms.area_2d)) parts.push(`area grid ${withSig(ms.area_2d, ms.sigma_area_2d, area)}${groundOf("area_2d", area)}`);
+  if (num(ms.perimeter_2d)) parts.push(`perimeter grid ${withSig(ms.perimeter_2d, ms.sigma_perimeter_2d, length)}${groundOf("perimeter_2d", length)}`);
+  if (num(ms.combined_scale_factor)) parts.push(`CSF ${ms.combined_scale_factor.toFixed(8)}`);
+  return parts.join(" · ") || "—";
 }
 
 export function escapeHtml(s) {
