@@ -286,3 +286,38 @@ def test_match_with_absurd_numbers_is_422_naming_the_field(served, where, value,
         r = client.post(url, json=body)
         assert r.status_code == 422, (url, r.text)
         assert r.json()["field"].startswith(field), r.text
+
+
+def test_visible_says_which_points_the_plane_hides(served):
+    """POST /scenes/{scene}/visible from 10 m above the plane (local z = 0): a point on it and
+    one 3 m above it are seen; one 2 m under it is hidden, the plane's surface at the
+    distance where the ray crosses z = 0 (hand geometry); bad input is 4xx naming the field."""
+    client, m = served
+
+    def world(p):
+        return (m[:3, :3] @ np.asarray(p, float) + m[:3, 3]).tolist()
+
+    origin = [3.0, 4.0, 10.0]
+    pts = [[1.0, 1.0, 0.0], [2.0, 2.0, 3.0], [1.0, 1.0, -2.0]]
+    r = client.post("/api/scenes/plane/visible",
+                    json={"origin": world(origin), "points": [world(p) for p in pts]})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["hidden"] == [False, False, True]
+    under = np.subtract(pts[2], origin)
+    crossing = float(np.linalg.norm(under) * 10.0 / 12.0)  # z goes 10 -> -2: the plane at 10/12
+    assert abs(body["surface_m"][2] - crossing) < 0.05, (body, crossing)
+    assert body["distance_m"][2] == pytest.approx(float(np.linalg.norm(under)))
+    assert client.post("/api/scenes/nosuch/visible", json={"origin": world(origin),
+                                                           "points": [world(pts[0])]}).status_code == 404
+    assert client.post("/api/scenes/hosted/visible", json={"origin": world(origin),
+                                                           "points": [world(pts[0])]}).status_code == 409
+    for bad, field in (({"origin": world(origin), "points": []}, "points"),
+                       ({"origin": world(origin), "points": [world(pts[0])] * 201}, "points"),
+                       ({"points": [world(pts[0])]}, "origin"),
+                       ({"origin": world(origin), "points": [world(origin)]}, "points"),
+                       ({"origin": world(origin), "points": [world(pts[0])],
+                         "model_matrix": [0.0] * 16}, "model_matrix")):
+        r = client.post("/api/scenes/plane/visible", json=bad)
+        assert r.status_code == 422, (bad, r.text)
+        assert field in r.text, (field, r.text)

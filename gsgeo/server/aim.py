@@ -26,7 +26,13 @@ from gsgeo.server.models import Mat16, Ray, rays_of
 from gsgeo.server.scenes import SceneFolders
 from gsgeo.server.textbody import TextCheckedRoute
 from gsgeo.service import ConflictError, NotFoundError
-from gsgeo.service.aiming import depth_on_ray, match_views, views_for_point
+from gsgeo.service.aiming import (
+    MAX_VISIBILITY_POINTS,
+    depth_on_ray,
+    match_views,
+    views_for_point,
+    visibility,
+)
 
 router = APIRouter(prefix="/api", route_class=TextCheckedRoute, tags=["aiming"], responses={
     404: {"model": ErrorBody, "description": "no such scene"},
@@ -100,6 +106,29 @@ def one_ray(ray: Ray, field: str = "ray") -> RayArrays:
              summary="Depth hint and near/far bounds of the splats along a ray")
 def depth(scene: SceneName, body: DepthRequest, request: Request) -> dict[str, Any]:
     return depth_on_ray(scene_folder(request, scene), one_ray(body.ray))
+
+
+class VisibleRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    origin: Position = Field(description="the camera's centre, rendered ECEF, metres")
+    points: list[Position] = Field(min_length=1, max_length=MAX_VISIBILITY_POINTS,
+                                   description="points to test, rendered ECEF, metres")
+    model_matrix: Mat16 | None = Field(
+        None, description="the tileset's modelMatrix, 16 numbers, column-major")
+
+
+class VisibleAnswer(BaseModel):
+    hidden: list[bool] = Field(description="per point: the splats' surface is in front of it")
+    surface_m: list[float | None] = Field(
+        description="per point: distance to the splats' surface along the ray to it, metres "
+                    "(null: no surface)")
+    distance_m: list[float] = Field(description="per point: its distance from the origin, metres")
+
+
+@router.post("/scenes/{scene}/visible", response_model=VisibleAnswer,
+             summary="Whether points are hidden behind the splats, seen from a camera")
+def visible(scene: SceneName, body: VisibleRequest, request: Request) -> dict[str, Any]:
+    return visibility(scene_folder(request, scene), body.origin, body.points, body.model_matrix)
 
 
 class CameraModel(BaseModel):

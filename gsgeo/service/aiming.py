@@ -65,6 +65,52 @@ def depth_on_ray(scene_dir: Path, rays: Rays) -> dict[str, Any]:
     return hint.to_json()
 
 
+#: Most points one visibility question may name (the labels of one view).
+MAX_VISIBILITY_POINTS = 200
+#: A point counts as hidden when the splats' surface along the ray to it is nearer than the
+#: point by more than this many metres, or this fraction of its distance if more (the depth
+#: hint scatters by a few centimetres on a surface, more at grazing rays past an edge).
+HIDDEN_MIN_M = 0.25
+HIDDEN_FRACTION = 0.02
+
+
+def visibility(scene_dir: Path, origin: Any, points: Any, model_matrix: Any = None
+               ) -> dict[str, Any]:
+    """Whether each of ``points`` (rendered ECEF, metres) is seen from ``origin`` (the camera,
+    rendered ECEF) in the scene: hidden when the depth hint along the ray to it
+    (gsgeo.aim.depth.depth_hint, under ``model_matrix``, 16 numbers column-major or None)
+    finds the splats' surface nearer than the point by more than HIDDEN_MIN_M or
+    HIDDEN_FRACTION of its distance. The JSON of POST /api/scenes/{scene}/visible:
+    {"hidden": [bool], "surface_m": [metres or null], "distance_m": [metres]}. One depth
+    query per point (at most MAX_VISIBILITY_POINTS: the labels a view shows)."""
+    o = np.asarray(origin, dtype=np.float64).reshape(3)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if not 1 <= len(pts) <= MAX_VISIBILITY_POINTS:
+        raise InputError(f"give 1 to {MAX_VISIBILITY_POINTS} points", field="points")
+    problem = origin_problem(o)
+    if problem is not None:
+        raise InputError(problem, field="origin")
+    mm = None
+    if model_matrix is not None:
+        try:
+            mm = matrix4(model_matrix)
+            invert_affine(mm)
+        except InputError as exc:
+            raise exc.at("model_matrix") from None
+    dist = np.linalg.norm(pts - o, axis=1)
+    if np.any(dist < 1e-3):
+        raise InputError(f"point {int(np.argmax(dist < 1e-3))} lies at the origin",
+                         field="points")
+    index = scene_splats(scene_dir)
+    surface: list[float | None] = []
+    for p in pts:
+        hint = depth_hint(index, o, p - o, None, mm)
+        surface.append(hint.depth_m if hint.hit else None)
+    tol = np.maximum(HIDDEN_MIN_M, HIDDEN_FRACTION * dist)
+    hidden = [s is not None and s < d - t for s, d, t in zip(surface, dist, tol, strict=True)]
+    return {"hidden": hidden, "surface_m": surface, "distance_m": dist.tolist()}
+
+
 def camera_of(doc: dict[str, Any], field: str) -> Camera:
     """The camera of a JSON object (contract: position, direction, up, fovy, width, height);
     InputError names ``<field>.<member>``."""

@@ -235,9 +235,16 @@ def test_epipolar_segments_and_predicted_pixel_agree_with_an_independent_project
     assert r2 <= r3 + 1e-6, (r2, r3)  # a projection never moves the truth farther out
     assert r3 <= K3, r3
     assert r2_drawn <= K2 or r3 > K2, (r2_drawn, r3)
-    # drawn: the predicted cross in its colour
+    # drawn: the predicted cross in its colour, beside the target: within 4.5 px of the
+    # predicted pixel nothing is drawn (rays, segments, the ellipse all pass through it)
     arm = [(np.asarray(pred["pixel"]) + [k, dy]).tolist() for k in (9, 12, 15) for dy in (-1, 0, 1)]
     assert colour_near(page.evaluate(OVERLAY_RGB_JS, arm), PREDICTED_RGB), arm
+    centre = [(np.asarray(pred["pixel"]) + [dx, dy]).tolist() for dx in range(-4, 5)
+              for dy in range(-4, 5) if np.hypot(dx, dy) <= 3.5]
+    assert all(px[3] == 0 for px in page.evaluate(OVERLAY_RGB_JS, centre)), centre
+    ring = [(np.asarray(pred["pixel"]) + [9 * np.cos(a), 9 * np.sin(a)]).tolist()
+            for a in np.linspace(0, 2 * np.pi, 24, endpoint=False)]
+    assert any(px[3] > 0 for px in page.evaluate(OVERLAY_RGB_JS, ring)), ring  # drawn around it
     assert page.errors == [], page.errors
 
 

@@ -286,3 +286,47 @@ def test_idle_means_no_frame(page):
     after = p.evaluate("[gsgeo.renderer.frames, gsgeo.renderer.framesOfAll]")
     assert after == frames, (frames, after)
     assert not p.errors, p.errors
+
+
+#: The largest alpha of the overlay's pixels within 8 px of each labelled marker `ids`.
+MOST_OPAQUE_JS = """(ids) => { const C = gsgeo.Cesium, o = gsgeo.draw.overlay, s = gsgeo.viewer.scene;
+    const img = o.ctx.getImageData(0, 0, o.canvas.width, o.canvas.height);
+    const dpr = window.devicePixelRatio || 1;
+    const alpha = (x, y) => img.data[4 * (Math.round(y * dpr) * img.width + Math.round(x * dpr)) + 3];
+    return ids.map((id) => { const m = o.labelled().find((k) => k.id === id);
+      const w = C.SceneTransforms.worldToWindowCoordinates(s, new C.Cartesian3(...m.position));
+      let most = 0;
+      for (let dy = -8; dy <= 8; dy++) for (let dx = -8; dx <= 8; dx++) {
+        most = Math.max(most, alpha(w.x + dx, w.y + dy)); }
+      return most; }); }"""
+
+
+def test_labels_the_splats_hide_are_drawn_faint(page):
+    """From 1.5 m above the lawn, 22 m south of the house, looking at it: the rays to the
+    north eaves corners B3 and B4 meet the south wall 0.8 m below the eaves (hand geometry of
+    the house in gsgeo.demo.place: walls at local y 2 and 9, eaves at z 5), so their markers
+    and labels are drawn faint (the server's /visible, from the splats); the south corners
+    B1 and B2 and the lamp top T1, in front of the house, are drawn in full, and so are
+    their pixels."""
+    p = page
+    cam = place.local_to_ecef(np.array([[-9.0, -20.0, 1.5]]))[0]
+    look = place.local_to_ecef(np.array([[-9.0, 5.5, 4.0]]))[0]
+    up = place.local_to_ecef(np.array([[-9.0, -20.0, 2.5]]))[0] - cam
+    p.evaluate("""([c, l, u]) => { const C = gsgeo.Cesium, V = (a) => new C.Cartesian3(...a);
+        const d = C.Cartesian3.normalize(C.Cartesian3.subtract(V(l), V(c), new C.Cartesian3()),
+                                         new C.Cartesian3());
+        const r = C.Cartesian3.normalize(C.Cartesian3.cross(d, V(u), new C.Cartesian3()),
+                                         new C.Cartesian3());
+        gsgeo.viewer.camera.setView({destination: V(c),
+            orientation: {direction: d, up: C.Cartesian3.cross(r, d, new C.Cartesian3())}}); }""",
+               [cam.tolist(), look.tolist(), up.tolist()])
+    # the labels tested from this pose, once the camera rested
+    p.wait_for_function("gsgeo.occlusion.checkedPose === gsgeo.occlusion.poseKey()")
+    hidden = set(p.evaluate("""() => gsgeo.draw.overlay.labelled()
+        .filter((m) => gsgeo.draw.overlay.hiddenKeys.has(m.key)).map((m) => m.id)"""))
+    assert {"B3", "B4"} <= hidden, hidden
+    assert not {"B1", "B2", "T1"} & hidden, hidden
+    # drawn faint: the most opaque pixel about the marker is about 0.3 of a full one
+    alpha = p.evaluate(MOST_OPAQUE_JS, ["B3", "B1"])
+    assert alpha[0] < 0.4 * 255 and alpha[1] > 0.9 * 255, alpha
+    assert not p.errors, p.errors

@@ -182,8 +182,26 @@ function stroke(g, width, color) {
   g.stroke();
 }
 
-/** Draw guide `gd` on the 2-D context `g` (CSS px). */
+/** Radius (CSS px) kept clear of every drawing around the predicted pixel (or, before there
+ *  is one, the depth hint): the feature to aim at stays seen, the hints are beside it. */
+export const CLEAR_PX = 5;
+
+/** Draw guide `gd` on the 2-D context `g` (CSS px), then clear the disc of CLEAR_PX around
+ *  the pixel the operator aims at of everything the overlay drew there (rays, segments, the
+ *  ellipse and the ellipsoid's outline pass through it). */
 function paint(g, gd) {
+  draw(g, gd);
+  const at = gd.predicted ? gd.predicted.pixel : (gd.depth && gd.depth.pixel);
+  if (!at) return;
+  g.save();
+  g.globalCompositeOperation = "destination-out";
+  g.beginPath();
+  g.arc(at[0], at[1], CLEAR_PX, 0, 2 * Math.PI);
+  g.fill();
+  g.restore();
+}
+
+function draw(g, gd) {
   g.setLineDash([]);
   g.lineCap = "round";
   for (const e of gd.epipolar) {
@@ -216,8 +234,8 @@ function paint(g, gd) {
     g.beginPath();
     // a crosshair with a gap, so the feature under it stays visible
     for (const [dx, dy] of [[1, 0], [-1, 0], [0, 1], [0, -1]]) {
-      g.moveTo(x + dx * 6, y + dy * 6);
-      g.lineTo(x + dx * 18, y + dy * 18);
+      g.moveTo(x + dx * 8, y + dy * 8);
+      g.lineTo(x + dx * 20, y + dy * 20);
     }
     stroke(g, 2, STYLE.predicted);
     if (axes.every(Number.isFinite)) {

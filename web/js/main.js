@@ -18,6 +18,7 @@ import { Still } from "./still.js";
 import { nextView } from "./views.js";
 import { raysInCurrentFrame } from "./rays.js";
 import { installNavigation } from "./navigate.js";
+import { installOcclusion } from "./occlusion.js";
 
 const Cesium = window.Cesium;
 
@@ -508,6 +509,7 @@ const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChan
 const buildings = buildingsPanel({ state, draw, modelMatrix, message, fail });
 installGuide(ctx, draw.overlay);
 const navigation = installNavigation(ctx, { overview });
+installOcclusion(ctx, draw.overlay);
 
 // ---------------------------------------------------------------------------------------
 // points

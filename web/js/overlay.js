@@ -48,6 +48,8 @@ export class Overlay {
     this.requestFrame = () => viewer.scene.requestRender();
     this.shown = null; // the view of the scene canvas' last frame (viewOf)
     this.queued = false;
+    this.hiddenKeys = new Set(); // labelled markers the splats hide (occlusion.js): drawn faint
+    this.markerListeners = [];
     viewer.scene.postRender.addEventListener(() => {
       const fixed = this.fixedView();
       if (!fixed) this.shown = viewOf(viewer);
@@ -56,8 +58,33 @@ export class Overlay {
   }
 
   clear(group) {
+    const had = (this.groups.get(group) || []).some((s) => s.marker && s.id);
     this.groups.set(group, []);
+    if (had) this.markersChanged();
     this.repaint();
+  }
+
+  /** `fn()` is called when a labelled marker (one with an id) is added or cleared. */
+  onMarkersChanged(fn) {
+    this.markerListeners.push(fn);
+  }
+
+  markersChanged() {
+    for (const fn of this.markerListeners) fn();
+  }
+
+  /** The markers with an id: [{id, position, key}] (key: id and position, kept across
+   *  redraws of the same marker). */
+  labelled() {
+    return [...this.groups.values()].flat().filter((s) => s.marker && s.id)
+      .map((s) => ({ id: s.id, position: s.position, key: markerKey(s) }));
+  }
+
+  /** The labelled markers (their keys) the splats hide: drawn faint. */
+  setHidden(keys) {
+    const same = keys.size === this.hiddenKeys.size && [...keys].every((k) => this.hiddenKeys.has(k));
+    this.hiddenKeys = keys;
+    if (!same) this.repaint();
   }
 
   /** Add a 3-D polyline: points [[x, y, z], ...] in rendered ECEF (m); style {color, width, dash,
@@ -78,6 +105,7 @@ export class Overlay {
   item(group, it) {
     if (!this.groups.has(group)) this.groups.set(group, []);
     this.groups.get(group).push(it);
+    if (it.marker && it.id) this.markersChanged();
     this.repaint();
   }
 
@@ -177,7 +205,10 @@ export class Overlay {
       const v = toView(s.position);
       if (v[2] > -near) continue;
       const [x, y] = toScreen(v);
+      const faint = s.id && this.hiddenKeys.has(markerKey(s));
+      if (faint) ctx.globalAlpha = HIDDEN_ALPHA;
       paintMarker(ctx, x, y, s);
+      if (faint) ctx.globalAlpha = 1;
     }
     for (const fn of this.painters) {
       ctx.save();
@@ -185,6 +216,14 @@ export class Overlay {
       ctx.restore();
     }
   }
+}
+
+/** Opacity of a marker and its label that the splats hide (occlusion.js). */
+export const HIDDEN_ALPHA = 0.3;
+
+/** A labelled marker's key: its id and position (mm), the same for the same marker drawn again. */
+export function markerKey(s) {
+  return `${s.id}@${s.position.map((x) => x.toFixed(3)).join(",")}`;
 }
 
 /** A marker at window position x, y (see Overlay.marker). */
