@@ -85,3 +85,32 @@ def test_check_points_come_with_their_ecef(tmp_path):
         assert np.abs(np.array(got["K1"]["ecef"]) - want).max() < 1e-3
         assert got["K2"]["ecef"] is None
         assert (got["C1"]["role"], got["K1"]["role"]) == ("control", "check")
+
+
+def test_check_points_keep_their_description(tmp_path):
+    """A check point's description (what and where the mark is) is read from a CSV column
+    `description` (or desc, remark, note) and a GeoJSON property of that name, given in JSON,
+    stored on SQLite and listed; longer than 300 characters is a 422 naming the field."""
+    from gsgeo.service.checkpoints import read_check_points
+
+    csv_rows, _ = read_check_points(b"id,easting,northing,height,Description\n"
+                                    b"K1,1.0,2.0,3.0,PK nail in kerb\nK2,4.0,5.0,,\n", "csv")
+    assert [(r.id, r.description) for r in csv_rows] == [("K1", "PK nail in kerb"), ("K2", "")]
+    gj = (b'{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": '
+          b'{"id": "C1", "remark": "trig pillar"}, "geometry": {"type": "Point", '
+          b'"coordinates": [1.0, 2.0, 3.0]}}]}')
+    assert [r.description for r in read_check_points(gj, "geojson")[0]] == ["trig pillar"]
+    with TestClient(create_app(ServerConfig(data_dir=tmp_path / "data",
+                                            allowed_hosts={"testserver"}))) as c:
+        assert c.post("/api/projects", json={"name": "G", "id": "g", "crs": "EPSG:32630"}
+                      ).status_code == 201
+        r = c.post("/api/projects/g/checkpoints", json={"crs": "EPSG:32630", "points": [
+            {"id": "K1", "x": 699000.0, "y": 5710000.0, "z": 50.0, "description": "PK nail in kerb"},
+            {"id": "K2", "x": 699010.0, "y": 5710000.0}]})
+        assert r.status_code == 201, r.text
+        listed = c.get("/api/projects/g/checkpoints").json()["check_points"]
+        got = {p["id"]: p["description"] for p in listed}
+        assert got == {"K1": "PK nail in kerb", "K2": ""}
+        r = c.post("/api/projects/g/checkpoints", json={"crs": "EPSG:32630", "points": [
+            {"id": "K3", "x": 1.0, "y": 2.0, "description": "x" * 301}]})
+        assert r.status_code == 422 and "description" in r.text, r.text

@@ -34,7 +34,8 @@ def ensure_project(data_dir: str | os.PathLike, build: DemoBuild) -> tuple[Proje
             project = projects.create_project(name=PROJECT_NAME, id=PROJECT_ID,
                                               description=DESCRIPTION, scene=SCENE_NAME,
                                               crs=place.CRS, sigma_px=1.0)
-        rows = [CheckPointRow(t.id, t.easting, t.northing, t.height) for t in truth_points()]
+        rows = [CheckPointRow(t.id, t.easting, t.northing, t.height, description=t.description)
+                for t in truth_points()]
         # a rebuild states the same truth again: its ids are replaced by name, not refused
         n = projects.add_check_points(project.id, rows, place.CRS,
                                       source=f"gsgeo demo ground truth ({build.checkpoints_csv.name})",

@@ -406,7 +406,7 @@ def delete_building(pid: PID, bid: ITEM, request: Request,
 def check_point_json(c: CheckPointRecord) -> dict[str, Any]:
     return {"id": c.id, "x": c.x, "y": c.y, "z": c.z, "crs": c.crs, "role": c.role,
             "sigma_h": c.sigma_h, "sigma_v": c.sigma_v, "source": c.source,
-            "created_at": c.created_at}
+            "description": c.description, "created_at": c.created_at}
 
 
 @router.get("/projects/{pid}/checkpoints", summary="List check points (as given, in their CRS)")
@@ -420,7 +420,8 @@ def list_check_points(pid: PID, request: Request) -> dict[str, Any]:
 @router.post("/projects/{pid}/checkpoints", status_code=201,
              summary="Add check points given as JSON in a stated CRS")
 def add_check_points(pid: PID, body: m.CheckPointsCreate, request: Request) -> dict[str, Any]:
-    rows = [CheckPointRow(c.id, c.x, c.y, c.z, c.sigma_h, c.sigma_v) for c in body.points]
+    rows = [CheckPointRow(c.id, c.x, c.y, c.z, c.sigma_h, c.sigma_v, c.description.strip())
+            for c in body.points]
     n = svc(request).add_check_points(pid, rows, body.crs, role=body.role, replace=body.replace,
                                       overwrite=body.overwrite, source=body.source)
     return {"imported": n}

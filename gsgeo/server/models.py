@@ -194,6 +194,8 @@ class CheckPointIn(BaseModel):
         None, description="stated 1-sigma horizontal precision, metres")
     sigma_v: Annotated[float, Field(gt=0, le=1e4)] | None = Field(
         None, description="stated 1-sigma vertical precision, metres")
+    description: Annotated[str, Field(max_length=300)] = Field(
+        "", description="what and where the mark is, e.g. 'PK nail in kerb'")
 
 
 class CheckPointsCreate(BaseModel):

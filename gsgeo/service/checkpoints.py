@@ -50,6 +50,26 @@ class CheckPointRow:
     z: float | None
     sigma_h: float | None = None
     sigma_v: float | None = None
+    description: str = ""
+
+
+#: Columns (or properties) read as a point's description, the first found (case-insensitive).
+DESCRIPTION_COLUMNS = ("description", "desc", "remark", "remarks", "note")
+#: The longest description kept (characters).
+MAX_DESCRIPTION = 300
+
+
+def _description(value: JSON, field: str) -> str:
+    """A point's description: text (a number is written as given), at most MAX_DESCRIPTION
+    characters; empty when missing."""
+    if value is None:
+        return ""
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        raise InputError("expected text", field=field)
+    text = str(value).strip()
+    if len(text) > MAX_DESCRIPTION:
+        raise InputError(f"longer than {MAX_DESCRIPTION} characters", field=field)
+    return text
 
 
 def _sigma(value: JSON, field: str) -> float | None:
@@ -138,6 +158,7 @@ def _read_csv(data: bytes) -> list[CheckPointRow]:
         cols = reader.fieldnames or []
         cid, cx, cy = _pick(cols, ID_COLUMNS), _pick(cols, X_COLUMNS), _pick(cols, Y_COLUMNS)
         cz = _pick(cols, Z_COLUMNS)
+        cd = _pick(cols, DESCRIPTION_COLUMNS)
         if cid is None or cx is None or cy is None:
             raise InputError(
                 "the CSV header needs an id column (point_id, id or name) and coordinate "
@@ -149,7 +170,8 @@ def _read_csv(data: bytes) -> list[CheckPointRow]:
                 _num(r.get(cx), f"{at}, column {cx}"),
                 _num(r.get(cy), f"{at}, column {cy}"),
                 _num(r.get(cz), f"{at}, column {cz}", True) if cz else None,
-                *_sigmas(dict(r), cols, at)))
+                *_sigmas(dict(r), cols, at),
+                _description(r.get(cd), f"{at}, column {cd}") if cd else ""))
             _count(rows)
     except csv.Error as exc:
         limit = csv.field_size_limit()
@@ -200,7 +222,9 @@ def _read_geojson(data: bytes) -> list[CheckPointRow]:
             _num(c[0], f"{at}.geometry.coordinates[0]"),
             _num(c[1], f"{at}.geometry.coordinates[1]"),
             _num(c[2], f"{at}.geometry.coordinates[2]", True) if len(c) == 3 else None,
-            *_sigmas(props, list(props), f"{at}.properties")))
+            *_sigmas(props, list(props), f"{at}.properties"),
+            _description(props.get(dk), f"{at}.properties.{dk}")
+            if (dk := _pick(list(props), DESCRIPTION_COLUMNS)) else ""))
     return rows
 
 
@@ -239,6 +263,8 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
     ids = columns[names.index(cid)]
     sig_cols = [c for c in (_pick(names, SIGMA_H_COLUMNS), _pick(names, SIGMA_V_COLUMNS)) if c]
     sig = {c: columns[names.index(c)] for c in sig_cols}
+    cd = _pick(names, DESCRIPTION_COLUMNS)
+    descs = columns[names.index(cd)] if cd else None
     rows: list[CheckPointRow] = []
     for i, (pid, geom) in enumerate(zip(ids, geoms, strict=True)):
         at = f"layer {layer} feature {i}"
@@ -251,7 +277,9 @@ def _read_gpkg(data: bytes) -> tuple[list[CheckPointRow], str | None]:
                                   _num(float(geom.y), f"{at} y"),
                                   _num(None if z is None else float(z), f"{at} z", True),
                                   *_sigmas({c: _plain(v[i]) for c, v in sig.items()}, sig_cols,
-                                           at)))
+                                           at),
+                                  _description(_plain(descs[i]), f"{at}, column {cd}")
+                                  if descs is not None else ""))
         _count(rows)
     crs = None
     if meta.get("crs"):

@@ -1028,8 +1028,8 @@ class Projects(BuildingService):
         allowed = {item_id(i, "overwrite") for i in overwrite}
         source = _text(source, "source", 300)
         recs = [CheckPointRecord(project_id=pid, id=r.id, x=r.x, y=r.y, z=r.z, crs=crs.strip(),
-                                 role=role, source=source,
-                                 sigma_h=r.sigma_h, sigma_v=r.sigma_v) for r in rows]
+                                 role=role, source=source, sigma_h=r.sigma_h,
+                                 sigma_v=r.sigma_v, description=r.description) for r in rows]
         with self.store.transaction() as tx:
             self._project(tx, pid)
             given = set(ids)

@@ -156,6 +156,11 @@ MIGRATIONS: list[str] = [
     CREATE INDEX audit_project ON audit(project_id, seq);
     ALTER TABLE points ADD COLUMN measured_by TEXT;
     """,
+    # 8: a check or control point's description as given (what and where the mark is: "PK
+    # nail in kerb"), shown where the viewer lists and draws the point
+    """
+    ALTER TABLE check_points ADD COLUMN description TEXT NOT NULL DEFAULT '';
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -147,6 +147,10 @@ MIGRATIONS: list[str] = [
     END
     $$;
     """,
+    # 5: a check or control point's description as given (what and where the mark is)
+    """
+    ALTER TABLE check_points ADD COLUMN description TEXT NOT NULL DEFAULT '';
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

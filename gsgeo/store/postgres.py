@@ -480,20 +480,22 @@ class PostgresTransaction(Transaction):
         return [CheckPointRecord(project_id=r["project_id"], id=r["id"], x=r["x"], y=r["y"],
                                  z=r["z"], crs=r["crs"], role=r["role"], source=r["source"],
                                  created_at=r["created_at"], sigma_h=r["sigma_h"],
-                                 sigma_v=r["sigma_v"]) for r in rows]
+                                 sigma_v=r["sigma_v"], description=r["description"])
+                for r in rows]
 
     def upsert_check_points(self, records: list[CheckPointRecord]) -> None:
         t = now_iso()
         with self.con.cursor() as cur:
             cur.executemany(
                 b"INSERT INTO check_points (project_id, id, x, y, z, crs, role, source,"
-                b" created_at, sigma_h, sigma_v) VALUES (%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s)"
+                b" created_at, sigma_h, sigma_v, description)"
+                b" VALUES (%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s)"
                 b" ON CONFLICT (project_id, id) DO UPDATE SET x=excluded.x, y=excluded.y,"
                 b" z=excluded.z, crs=excluded.crs, role=excluded.role, source=excluded.source,"
                 b" created_at=excluded.created_at, sigma_h=excluded.sigma_h,"
-                b" sigma_v=excluded.sigma_v",
+                b" sigma_v=excluded.sigma_v, description=excluded.description",
                 [nul_free((c.project_id, c.id, c.x, c.y, c.z, c.crs, c.role, c.source, t,
-                           c.sigma_h, c.sigma_v)) for c in records],
+                           c.sigma_h, c.sigma_v, c.description)) for c in records],
             )
 
     def delete_check_point(self, pid: str, cid: str) -> bool:

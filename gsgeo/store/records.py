@@ -172,3 +172,4 @@ class CheckPointRecord:
     created_at: str = ""
     sigma_h: float | None = None  # stated 1-sigma horizontal precision, metres (None: not stated)
     sigma_v: float | None = None  # stated 1-sigma vertical precision, metres
+    description: str = ""  # what and where the mark is ("PK nail in kerb"), as given

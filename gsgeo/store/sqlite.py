@@ -403,18 +403,21 @@ class SQLiteTransaction(Transaction):
         return [CheckPointRecord(project_id=r["project_id"], id=r["id"], x=r["x"], y=r["y"],
                                  z=r["z"], crs=r["crs"], role=r["role"], source=r["source"],
                                  created_at=r["created_at"], sigma_h=r["sigma_h"],
-                                 sigma_v=r["sigma_v"]) for r in rows]
+                                 sigma_v=r["sigma_v"], description=r["description"])
+                for r in rows]
 
     def upsert_check_points(self, records: list[CheckPointRecord]) -> None:
         t = now_iso()
         self.con.executemany(
             "INSERT INTO check_points (project_id, id, x, y, z, crs, role, source, created_at,"
-            " sigma_h, sigma_v) VALUES (?,?,?,?,?,?,?,?,?,?,?) ON CONFLICT (project_id, id)"
+            " sigma_h, sigma_v, description) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)"
+            " ON CONFLICT (project_id, id)"
             " DO UPDATE SET x=excluded.x, y=excluded.y, z=excluded.z, crs=excluded.crs,"
             " role=excluded.role, source=excluded.source, created_at=excluded.created_at,"
-            " sigma_h=excluded.sigma_h, sigma_v=excluded.sigma_v",
+            " sigma_h=excluded.sigma_h, sigma_v=excluded.sigma_v,"
+            " description=excluded.description",
             [(c.project_id, c.id, c.x, c.y, c.z, c.crs, c.role, c.source, t, c.sigma_h,
-              c.sigma_v) for c in records],
+              c.sigma_v, c.description) for c in records],
         )
 
     def delete_check_point(self, pid: str, cid: str) -> bool:
