@@ -121,7 +121,7 @@ def server(tmp_path_factory):
         for cid, p in CONTROL.items():
             lon, lat, h = lon_lat_h(p)
             pts.append({"id": cid, "x": lon, "y": lat, "z": h + (0.5 if cid == BLUNDER else 0.0),
-                        "sigma_h": 0.01, "sigma_v": 0.01})
+                        "sigma_h": 0.01, "sigma_v": 0.01, "description": f"pillar {cid}"})
         r = c.post(f"/api/projects/{PID}/checkpoints",
                    json={"crs": "EPSG:4979", "role": "control", "points": pts})
         assert r.status_code in (200, 201), r.text
@@ -180,6 +180,8 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
     p.wait_for_selector("#georef-banner:not([hidden])")
     assert "This scene is not georeferenced" in p.inner_text("#georef-banner")
     assert p.evaluate("gsgeo.georefVersion") == 0
+    # no globe under a scene in its trainer's frame (its surface would cut through the scene)
+    assert p.evaluate("gsgeo.viewer.scene.globe.show") is False
     old_root = root_transform(p)
     assert np.allclose(old_root[:3, :3], LOCAL[:3, :3], atol=1e-9)
 
@@ -196,7 +198,7 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
     c3 = lon_lat_h(CONTROL["C3"])
     text = p.inner_text("#georef-table tbody tr[data-id='C3'] td:nth-child(2)")
     assert [float(v) for v in text.split(" (")[0].split(", ")] == pytest.approx(list(c3), abs=1e-9), text
-    assert text.endswith("(EPSG:4979)"), text
+    assert text.endswith("(EPSG:4979) · pillar C3"), text
     p.click("#georef-table tbody tr[data-id='C3'] button.known")
     centre = p.evaluate("[gsgeo.viewer.scene.canvas.clientWidth / 2,"
                         " gsgeo.viewer.scene.canvas.clientHeight / 2]")
@@ -264,6 +266,7 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
         x = apply(LOCAL, p_local)
         assert np.linalg.norm(apply(sim, x) - apply(truth_sim, x)) < 0.05
     p.wait_for_selector("#georef-banner", state="hidden")
+    assert p.evaluate("gsgeo.viewer.scene.globe.show") is True  # the Earth under it again
     # the camera moved with the scene: the feature is where it was on the screen
     win_after = window_of(p, apply(sim, apply(LOCAL, feature)))
     assert np.allclose(win_after, win_before, atol=1.0), (win_before, win_after)
@@ -332,6 +335,7 @@ def test_panel_residuals_outlier_exclude_apply_undo(server, page):
                         timeout=60_000)
     assert np.allclose(root_transform(p), old_root, rtol=0, atol=1e-6)
     p.wait_for_selector("#georef-banner:not([hidden])")
+    assert p.evaluate("gsgeo.viewer.scene.globe.show") is False  # in its trainer's frame again
     undo = np.array(resp.value.json()["similarity"], float).reshape(4, 4).T
     win_after = window_of(p, apply(undo, apply(TRUTH, feature)))
     assert np.allclose(win_after, win_before, atol=1.0), (win_before, win_after)

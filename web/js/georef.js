@@ -167,7 +167,9 @@ export function georefPanel(ctx) {
   /** The banner over an un-georeferenced scene. */
   function banner() {
     const info = state.scenes.find((s) => s.name === state.sceneName);
-    $("#georef-banner").hidden = !(state.sceneName && notGeoreferenced(info));
+    const local = Boolean(state.sceneName && notGeoreferenced(info));
+    $("#georef-banner").hidden = !local;
+    if (ctx.localScene) ctx.localScene(local);
   }
 
   async function projectsOnScene() {

@@ -505,7 +505,18 @@ const ctx = {
   modeChanged: () => drawSelected(),
 };
 
-const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged, viewKnown, knownText });
+const georef = georefPanel({ state, message, fail, sceneCentre, georeferenceChanged, viewKnown, knownText,
+  localScene });
+
+/** A scene still in its trainer's frame sits at lat 0, lon 0 with the Earth's surface cutting
+ *  through it where its z is 0: the globe hid what lay below, and from a camera under that
+ *  surface a black wedge showed where the globe is not drawn. The globe is shown only under a
+ *  georeferenced scene. */
+function localScene(local) {
+  if (viewer.scene.globe.show === !local) return;
+  viewer.scene.globe.show = !local;
+  viewer.scene.requestRender();
+}
 const buildings = buildingsPanel({ state, draw, modelMatrix, message, fail });
 installGuide(ctx, draw.overlay);
 const navigation = installNavigation(ctx, { overview });
@@ -937,11 +948,12 @@ function viewKnown(id) {
   message(`Looking at ${c.role === "control" ? "control" : "check"} point ${id}.`);
 }
 
-/** The known point's coordinates as given, in its CRS's axis order: "545012.345, 258012.345,
- *  12.345 (EPSG:27700)" (up to 9 decimals: degrees keep theirs). */
+/** The known point's coordinates as given, in its CRS's axis order, and its description:
+ *  "545012.345, 258012.345, 12.345 (EPSG:27700) · PK nail in kerb" (up to 9 decimals:
+ *  degrees keep theirs). */
 function knownText(c) {
   const f = (v) => (v === null || v === undefined ? "—" : String(Number(Number(v).toFixed(9))));
-  return `${f(c.x)}, ${f(c.y)}, ${f(c.z)} (${c.crs})`;
+  return `${f(c.x)}, ${f(c.y)}, ${f(c.z)} (${c.crs})${c.description ? ` · ${c.description}` : ""}`;
 }
 
 /** Buttons for known points `ids`: each flies to a view of its point. */
