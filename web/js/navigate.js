@@ -176,12 +176,12 @@ export function installNavigation(ctx, { overview }) {
   // drags: pan (left) and orbit (right, middle, or left with Shift or Ctrl)
   canvas.addEventListener("contextmenu", (ev) => ev.preventDefault());
   canvas.addEventListener("pointerdown", (ev) => {
-    if (nav.drag || ev.button > 2) return;
+    if (ev.button > 2) return; // a new press starts a new drag (a release outside the window was missed)
     const r = canvas.getBoundingClientRect();
     const pos = [ev.clientX - r.left, ev.clientY - r.top];
     const orbit = ev.button !== 0 || ev.shiftKey || ev.ctrlKey;
     const p0 = cameraPose();
-    const drag = { id: ev.pointerId, pos, orbit, p0, last: [0, 0], moving: false, point: null, grabbed: false };
+    const drag = { id: ev.pointerId, pos, orbit, p0, last: [0, 0], moving: false, point: null };
     nav.drag = drag;
   });
   /** The splat grabbed (pan) or the pivot (orbit), asked once the press is a drag (a click
@@ -193,7 +193,6 @@ export function installNavigation(ctx, { overview }) {
       if (!point && drag.orbit) point = await pointUnder([canvas.clientWidth / 2, canvas.clientHeight / 2]);
       if (!point && drag.orbit) point = fallbackPoint(drag.pos);
       drag.point = point;
-      drag.grabbed = true;
       moveDrag(drag); // also when the button is up already: the drag's whole move
     } finally {
       nav.grabbing--;
