@@ -238,9 +238,12 @@ def test_check_points_layer(bng, tmp_path):
     rec = res[0].record()
     cps = [{"id": rec["point_id"], "easting": rec["easting"] + 0.01, "northing": rec["northing"],
             "height": rec["height"] - 0.02},
-           {"id": "CP9", "x": rec["easting"] + 50, "y": rec["northing"], "z": 70.0}]
+           {"id": "CP9", "x": rec["easting"] + 50, "y": rec["northing"], "z": 70.0,
+            "description": "PK nail in kerb"}]
     out = write_measurements(tmp_path / "cp.gpkg", res, check_points=cps)
     df = pyogrio.read_dataframe(out, layer="check_points").set_index("point_id")
+    assert df.loc["CP9", "description"] == "PK nail in kerb"  # read back by GDAL
+    assert df.loc[rec["point_id"], "description"] == ""
     assert df.loc[rec["point_id"], "d_easting"] == pytest.approx(-0.01, abs=1e-9)
     assert df.loc[rec["point_id"], "d_height"] == pytest.approx(0.02, abs=1e-9)
     assert bool(df.loc[rec["point_id"], "measured"]) and not bool(df.loc["CP9", "measured"])

@@ -90,7 +90,8 @@ def test_check_points_come_with_their_ecef(tmp_path):
 def test_check_points_keep_their_description(tmp_path):
     """A check point's description (what and where the mark is) is read from a CSV column
     `description` (or desc, remark, note) and a GeoJSON property of that name, given in JSON,
-    stored on SQLite and listed; longer than 300 characters is a 422 naming the field."""
+    stored on SQLite, listed, and served in the OGC API's check points; longer than 300
+    characters is a 422 naming the field."""
     from gsgeo.service.checkpoints import read_check_points
 
     csv_rows, _ = read_check_points(b"id,easting,northing,height,Description\n"
@@ -114,3 +115,9 @@ def test_check_points_keep_their_description(tmp_path):
         r = c.post("/api/projects/g/checkpoints", json={"crs": "EPSG:32630", "points": [
             {"id": "K3", "x": 1.0, "y": 2.0, "description": "x" * 301}]})
         assert r.status_code == 422 and "description" in r.text, r.text
+        # and in the OGC API's check-points collection
+        r = c.get("/ogc/collections/g.check_points/items", params={"f": "json"})
+        assert r.status_code == 200, r.text
+        props = {f["properties"]["point_id"]: f["properties"]["description"]
+                 for f in r.json()["features"]}
+        assert props == {"K1": "PK nail in kerb", "K2": ""}

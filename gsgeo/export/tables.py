@@ -56,7 +56,7 @@ POLYGON_TYPES: dict[str, str] = {"polygon_id": "str", "point_ids": "str", "n_poi
                                  "perimeter_2d": "float", "sigma_perimeter_2d": "float"}
 ELLIPSE_TYPES: dict[str, str] = {"point_id": "str", "ellipse_major_95": "float",
                                  "ellipse_minor_95": "float", "ellipse_bearing_deg": "float"}
-CHECK_POINT_TYPES: dict[str, str] = {"point_id": "str", "role": "str",
+CHECK_POINT_TYPES: dict[str, str] = {"point_id": "str", "role": "str", "description": "str",
                                      "easting": "float", "northing": "float",
                                      "height": "float", "measured": "bool",
                                      "d_easting": "float", "d_northing": "float",
@@ -612,9 +612,11 @@ def _collect_features(data: ExportData, lines: Iterable[Any], polygons: Iterable
 def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: dict[str, int],
                           xyz: np.ndarray, g: GridCRS) -> None:
     """Check points in the export's grid CRS: id and easting/northing[/height] (or x/y/z),
-    ``role`` ("check" or "control"; "check" when not given)."""
+    ``role`` ("check" or "control"; "check" when not given), ``description`` (text, or
+    empty)."""
     rows = []
     roles = []
+    descriptions: list[str] = []
     for i, c in enumerate(check_points):
         cid = _get(c, "point_id", _get(c, "id"))
         vals = []
@@ -634,6 +636,7 @@ def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: 
             raise InputError(f"check point '{cid}': coordinates must be numbers") from None
         rows.append((str(cid), row))
         roles.append(str(_get(c, "role") or "check"))
+        descriptions.append(str(_get(c, "description") or ""))
     if not rows:
         return
     cxyz = np.array([r[1] for r in rows], dtype=np.float64)
@@ -647,6 +650,7 @@ def _collect_check_points(data: ExportData, check_points: Iterable[Any], index: 
     data.check_points = Table({
         "point_id": np.array([r[0] for r in rows], dtype=object),
         "role": np.array(roles, dtype=object),
+        "description": np.array(descriptions, dtype=object),
         "easting": cxyz[:, 0], "northing": cxyz[:, 1], "height": cxyz[:, 2],
         "measured": has,
         "d_easting": d[:, 0], "d_northing": d[:, 1], "d_height": d[:, 2],

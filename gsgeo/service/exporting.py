@@ -110,7 +110,8 @@ def export_project(svc: Projects, pid: str, outdir: Path, fmt: str,
     check = []
     if cps:
         xyz = check_points_in_grid(cps, project, grid_crs, svc.data_dir)
-        check = [{"id": c.id, "role": c.role, "easting": float(x[0]), "northing": float(x[1]),
+        check = [{"id": c.id, "role": c.role, "description": c.description,
+                  "easting": float(x[0]), "northing": float(x[1]),
                   "height": None if x[2] != x[2] else float(x[2])} for c, x in zip(cps, xyz,
                                                                                   strict=True)]
     write_measurements(path, measurements, lines=kept["line"], polygons=kept["polygon"],

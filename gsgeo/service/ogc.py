@@ -445,7 +445,8 @@ class FeatureService:
             if pt is not None and pt.record is not None:
                 recs.append(pt.record)
                 stamps.append(pt.updated_at)
-        check = [{"id": c.id, "role": c.role, "easting": float(x[0]), "northing": float(x[1]),
+        check = [{"id": c.id, "role": c.role, "description": c.description,
+                  "easting": float(x[0]), "northing": float(x[1]),
                   "height": None if not math.isfinite(x[2]) else float(x[2])}
                  for c, x in zip(cps, enh, strict=True)]
         if recs:
@@ -453,7 +454,8 @@ class FeatureService:
             props = _rows(data.check_points.columns) if data.check_points is not None else []
         else:  # nothing measured yet: no differences
             props = [dict.fromkeys(CHECK_POINT_TYPES) | {
-                "point_id": k["id"], "role": k["role"], "easting": k["easting"],
+                "point_id": k["id"], "role": k["role"], "description": k["description"],
+                "easting": k["easting"],
                 "northing": k["northing"], "height": k["height"], "measured": False}
                 for k in check]
         has_h = np.isfinite(enh[:, 2])
