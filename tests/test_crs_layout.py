@@ -5,6 +5,8 @@ conversions, one parse_crs taking anything pyproj takes, one transformer factory
 from __future__ import annotations
 
 import ast
+import functools
+from pathlib import Path
 
 import numpy as np
 import pyproj
@@ -18,9 +20,11 @@ from gsgeo.errors import CRSError
 from gsgeo.tiles import georef
 
 
-def _modules():
-    for path in sorted((REPO / "gsgeo").rglob("*.py")):
-        yield path, ast.parse(path.read_text(encoding="utf-8"))
+@functools.cache
+def _modules() -> tuple[tuple[Path, ast.Module], ...]:
+    """Every module of gsgeo/ parsed, once for this module's tests (each walks them all)."""
+    return tuple((path, ast.parse(path.read_text(encoding="utf-8")))
+                 for path in sorted((REPO / "gsgeo").rglob("*.py")))
 
 
 def test_one_enu_rotation_in_lon_lat_order():
