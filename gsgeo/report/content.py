@@ -656,7 +656,7 @@ def _buildings_section(data: JSONObject) -> Section:
     table = _table(
         [("Building", False), ("Roof", False), (f"volume [{unit}³] ± σ", True),
          (f"footprint, grid [{unit}²] ± σ", True), (f"eaves H [{unit}] ± σ [mm]", True),
-         (f"ridge H [{unit}] ± σ [mm]", True), ("height [m] ± σ [mm]", True),
+         (f"ridge H [{unit}] ± σ [mm]", True), (f"height [{unit}] ± σ [mm]", True),
          ("Warnings", False)],
         [row(b) for b in rows], ["failed" if b.get("error") else "" for b in rows],
         caption="LoD2 models adjusted from measured roof corners: volume down to the ground "
