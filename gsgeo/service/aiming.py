@@ -65,6 +65,19 @@ def depth_on_ray(scene_dir: Path, rays: Rays) -> dict[str, Any]:
     return hint.to_json()
 
 
+def checked_model_matrix(model_matrix: Any) -> np.ndarray | None:
+    """A request's ``model_matrix`` (16 numbers, column-major, or None) as a 4 x 4 matrix that
+    can be inverted, or None; InputError about ``model_matrix`` otherwise."""
+    if model_matrix is None:
+        return None
+    try:
+        mm = matrix4(model_matrix)
+        invert_affine(mm)
+    except InputError as exc:
+        raise exc.at("model_matrix") from None
+    return mm
+
+
 #: Most points one visibility question may name (the labels of one view).
 MAX_VISIBILITY_POINTS = 200
 #: A point counts as hidden when the splats' surface along the ray to it is nearer than the
@@ -90,13 +103,7 @@ def visibility(scene_dir: Path, origin: Any, points: Any, model_matrix: Any = No
     problem = origin_problem(o)
     if problem is not None:
         raise InputError(problem, field="origin")
-    mm = None
-    if model_matrix is not None:
-        try:
-            mm = matrix4(model_matrix)
-            invert_affine(mm)
-        except InputError as exc:
-            raise exc.at("model_matrix") from None
+    mm = checked_model_matrix(model_matrix)
     dist = np.linalg.norm(pts - o, axis=1)
     if np.any(dist < 1e-3):
         raise InputError(f"point {int(np.argmax(dist < 1e-3))} lies at the origin",
@@ -165,14 +172,8 @@ def match_views(reference: dict[str, Any], target: dict[str, Any],
     pixel = np.asarray(reference["pixel"], dtype=np.float64)
     foreground = None
     if scene_dir is not None:
-        mm = None
-        if model_matrix is not None:
-            try:
-                mm = matrix4(model_matrix)
-                invert_affine(mm)
-            except InputError as exc:
-                raise exc.at("model_matrix") from None
-        foreground = foreground_of_click(scene_splats(scene_dir), ref.camera, pixel, hint, mm)
+        foreground = foreground_of_click(scene_splats(scene_dir), ref.camera, pixel, hint,
+                                         checked_model_matrix(model_matrix))
     return match_feature(ref, pixel, tgt, near, far, hint,
                          None if normal is None else np.asarray(normal, dtype=np.float64),
                          foreground).to_json()
