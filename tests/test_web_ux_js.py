@@ -176,3 +176,37 @@ def test_pan_and_orbit_arithmetic():
     assert elev["raise"] == pytest.approx(55)
     assert elev["low"] == pytest.approx(2)
     assert elev["high"] == pytest.approx(88)
+
+
+def test_heading_is_the_azimuth_of_the_view_in_the_local_frame():
+    """web/js/navmath.js headingOf (the north arrow's angle): the direction's azimuth clockwise
+    from north in the local east-north-up frame at the camera (pyproj's geodetic latitude and
+    longitude of the position give the frame), the up vector's when looking straight down."""
+    import pyproj
+
+    geod = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
+    cases = []
+    for lon, lat, h, az, el in [(0.12, 52.2, 60, 30, -40), (-122.4, 37.8, 10, 250, -5),
+                                (151.2, -33.9, 500, 179, 20), (10, 0, 0, 90, -60)]:
+        pos = np.array(geod.transform(lon, lat, h))
+        lam, phi = np.radians(lon), np.radians(lat)
+        east = np.array([-np.sin(lam), np.cos(lam), 0])
+        north = np.array([-np.sin(phi) * np.cos(lam), -np.sin(phi) * np.sin(lam), np.cos(phi)])
+        up = np.array([np.cos(phi) * np.cos(lam), np.cos(phi) * np.sin(lam), np.sin(phi)])
+        a, e = np.radians(az), np.radians(el)
+        d = np.cos(e) * (np.sin(a) * east + np.cos(a) * north) + np.sin(e) * up
+        cam_up = np.cross(np.cross(d, up), d)
+        cases.append((pos.tolist(), d.tolist(), (cam_up / np.linalg.norm(cam_up)).tolist(), az))
+    # straight down, the top of the image towards azimuth 300
+    a = np.radians(300)
+    cases.append((pos.tolist(), (-up).tolist(), (np.sin(a) * east + np.cos(a) * north).tolist(), 300))
+    src = (f"import * as N from '{(WEB_JS / 'navmath.js').as_uri()}';\n"
+           f"const cases = {json.dumps([c[:3] for c in cases])};\n"
+           "console.log(JSON.stringify(cases.map(([p, d, u]) => N.headingOf(p, d, u))));")
+    out = subprocess.run(["node", "--input-type=module", "-e", src], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    got = np.degrees(json.loads(out.stdout))
+    # (the frame's up is the ellipsoid's normal scaled through the camera, as Cesium's: at 500 m
+    # above the ellipsoid it leans 1e-6 degrees from the geodetic normal pyproj's latitude gives)
+    assert got == pytest.approx([c[3] for c in cases], abs=1e-5)

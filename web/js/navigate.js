@@ -15,8 +15,8 @@
 // the canvas' top-left corner.
 
 import { api } from "./api.js";
-import { DRAG_START_PX, MAX_RANGE_RADII, MIN_GAP_M, ORBIT_DEG_PER_PX, metresPerPixel, notches, orbitedPose,
-  pannedPosition, scaleBar, zoomedPosition } from "./navmath.js";
+import { DRAG_START_PX, MAX_RANGE_RADII, MIN_GAP_M, ORBIT_DEG_PER_PX, headingOf, metresPerPixel, notches,
+  orbitedPose, pannedPosition, scaleBar, zoomedPosition } from "./navmath.js";
 import { captureRay } from "./rays.js";
 
 const Cesium = window.Cesium;
@@ -311,7 +311,12 @@ export function installNavigation(ctx, { overview }) {
     const key = poseKey();
     if (key === drawnPose) return;
     drawnPose = key;
-    if (arrow) arrow.style.transform = `rotate(${-Cesium.Math.toDegrees(viewer.camera.heading)}deg)`;
+    if (arrow) {
+      const cam = viewer.camera;
+      const xyz = (c) => [c.x, c.y, c.z];
+      const heading = headingOf(xyz(cam.positionWC), xyz(cam.directionWC), xyz(cam.upWC));
+      arrow.style.transform = `rotate(${-Cesium.Math.toDegrees(heading)}deg)`;
+    }
     const ask = ++centreAsk;
     setTimeout(async () => { // the view's centre depth, once the camera rests
       if (ask !== centreAsk || nav.busy) return;

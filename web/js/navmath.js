@@ -96,3 +96,22 @@ export function orbitedPose(pose, pivot, vertical, yaw, pitch) {
   up = rotate(up, vertical, yaw);
   return { position: add(pivot, rel), direction: dir, up, pitch: a };
 }
+
+/** WGS 84's semi-axes (m). */
+const WGS84_A = 6378137.0;
+const WGS84_B = 6356752.314245179;
+
+/** Heading (rad, clockwise from north, 0..2 pi) of a camera at ECEF `position` (m) looking
+ *  along unit `direction` with unit `up`: the azimuth of the direction in the local
+ *  east-north-up frame, or of `up` when it looks straight down or up (as Cesium's
+ *  camera.heading; that getter also turns the camera's axes by rounding, so it is not read
+ *  for what is drawn after every frame). */
+export function headingOf(position, direction, up) {
+  const [x, y, z] = position;
+  const u = unit([x / WGS84_A ** 2, y / WGS84_A ** 2, z / WGS84_B ** 2]);
+  const e = Math.hypot(x, y) > 0 ? unit([-y, x, 0]) : [0, 1, 0];
+  const n = cross(u, e);
+  const v = Math.abs(dot(direction, u)) < 1 - 1e-3 ? direction : up;
+  const h = Math.atan2(dot(v, e), dot(v, n));
+  return h < 0 ? h + 2 * Math.PI : h;
+}

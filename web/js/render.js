@@ -66,6 +66,24 @@ function dropSortCompletionFrames(scene, tileset) {
   });
 }
 
+/** CesiumJS reads the camera's heading and roll on every animation tick while anything listens
+ *  to camera.changed, and each read turns the camera's axes into its local east-north-up frame
+ *  and back: the direction drifts by ~3e-16 a tick, which the scene's camera check (relative
+ *  1e-15) takes for a move every few ticks. After every camera move that made 15-25 more
+ *  frames (each of every splat: 22 CPU-seconds for one arrow key on the demo in a software
+ *  renderer, against 5 without) until the drift found a fixed point. The only listener is the
+ *  Viewer's default data source's entity clustering, and nothing here is an entity: its
+ *  listener is removed. CesiumJS 1.145 (pinned): EntityCluster's private _removeEventListener,
+ *  the remover its destroy() calls (revisit on a Cesium upgrade). */
+function stopHeadingDrift(viewer) {
+  const display = viewer.dataSourceDisplay;
+  const cluster = display && display.defaultDataSource && display.defaultDataSource.clustering;
+  if (cluster && typeof cluster._removeEventListener === "function") {
+    cluster._removeEventListener();
+    cluster._removeEventListener = undefined;
+  }
+}
+
 /** Whether a sort of tileset `t`'s splats is under way or waits to be committed. */
 export function sortPending(t) {
   const p = t && t.show && t.gaussianSplatPrimitive;
@@ -142,6 +160,7 @@ export class RenderOnDemand {
     scene.maximumRenderTimeChange = Number.POSITIVE_INFINITY;
     this.moving = false;
     dropSortCompletionFrames(scene, () => this.tileset());
+    stopHeadingDrift(viewer);
     let command = null; // the command the frame being drawn draws in full (fullCommand)
     scene.preRender.addEventListener(() => { command = fullCommand(this.tileset()); });
     scene.postRender.addEventListener(() => {
