@@ -154,7 +154,7 @@ def summary(r: dict) -> str:
     sec = {k: tm.get(k, float("nan")) / 1000 for k in ("rays", "depth", "reference", "suggested")}
     return (f"A -> rays {sec['rays']:.1f} s (wall {r['wall_s']:.1f} s); depth {sec['depth']:.2f} s, "
             f"reference {sec['reference']:.1f} s, views {sec['suggested']:.1f} s; {views}; "
-            f"{tm['added']} auto rays")
+            f"{tm['added']} auto rays; ray 1 snapped {tm.get('snap_px', 0):.2f} px")
 
 
 def auto_point(page, t) -> dict:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from aim_helpers import plane_tileset
@@ -321,3 +323,51 @@ def test_visible_says_which_points_the_plane_hides(served):
         r = client.post("/api/scenes/plane/visible", json=bad)
         assert r.status_code == 422, (bad, r.text)
         assert field in r.text, (field, r.text)
+
+
+# /api/snap ----------------------------------------------------------------------------------
+def _snap_body(click) -> dict:
+    from test_aim_match import REF
+    from test_aim_snap import ORIGIN, checker, drawn
+
+    from gsgeo.aim.images import encode_png
+
+    return {"reference": {"image": encode_png(drawn(checker)), "origin": ORIGIN.tolist(),
+                          "camera": REF.to_json(), "pixel": list(click)}}
+
+
+def test_snap_moves_a_click_onto_the_target_centre_or_says_why_not(served):
+    from test_aim_snap import FEATURE, ORIGIN
+
+    client, _ = served
+    truth = FEATURE + ORIGIN
+    r = client.post("/api/snap", json=_snap_body(truth + [1.2, -0.9]))
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["ok"] is True and out["reason"] is None
+    assert np.linalg.norm(np.array(out["pixel"]) - truth) < 0.15  # PNG's 8 bits included
+    assert out["moved_px"] == pytest.approx(1.5, abs=0.15)
+    far = truth + [10.0, 10.0]  # on the flat white rim: nothing to snap to
+    r = client.post("/api/snap", json=_snap_body(far))
+    assert r.status_code == 200 and r.json()["ok"] is False
+    assert r.json()["pixel"] == pytest.approx(far.tolist()) and r.json()["reason"]
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda b: b["reference"].update(image="not base64!"), "reference.image"),
+    (lambda b: b["reference"].pop("pixel"), "reference.pixel"),
+    (lambda b: b["reference"]["camera"].update(fovy=4.0), "reference.camera.fovy"),
+    (lambda b: b["reference"].update(origin=[2000, 0]), "reference.image"),
+    (lambda b: b["reference"].update(pixel=[float("nan"), 3]), "reference.pixel"),
+    (lambda b: b.update(extra=1), "extra"),
+])
+def test_snap_of_a_bad_request_is_422_naming_the_field(served, change, field):
+    from test_aim_snap import FEATURE
+
+    client, _ = served
+    body = _snap_body(FEATURE)
+    change(body)
+    r = client.post("/api/snap", content=json.dumps(body, allow_nan=True),
+                    headers={"content-type": "application/json"})
+    assert r.status_code == 422, r.text
+    assert field in r.json()["message"], r.json()["message"]

@@ -96,7 +96,7 @@ def test_auto_aim_and_enter_say_what_happened_and_what_to_do_next():
     t = run_js("""console.log(JSON.stringify({none: T.autoAimSummary(0, 4, 4),
         some: T.autoAimSummary(3, 4, 1), all: T.autoAimSummary(4, 4, 0),
         whole: T.autoAimDeclined('ray 1 hits no splat (sky?).'),
-        one: T.tooFewRays('P3', 1), zero: T.tooFewRays('P3', 0)}));""", None)
+        one: T.tooFewRays('P3', 1), zero: T.tooFewRays('P3', 0), snap: T.snapText(1.456)}));""", None)
     assert "Enter" not in t["none"] and "another view" in t["none"] and "none of the 4 views" in t["none"]
     assert t["some"].startswith("Auto-aim added 3 rays of 4 views; 1 declined")
     assert "Enter stores" in t["some"]
@@ -104,6 +104,7 @@ def test_auto_aim_and_enter_say_what_happened_and_what_to_do_next():
     assert t["whole"].startswith("Auto-aim declined: ray 1 hits no splat (sky?). Click it yourself")
     assert t["one"].startswith("Nothing stored: P3 has 1 ray and a point needs 2 or more.")
     assert "another view" in t["one"] and "add ray 1" in t["zero"]
+    assert t["snap"].startswith("Ray 1 moved 1.5 px onto the point feature")
     assert max(len(x) for x in t.values()) < 130, t
 
 

@@ -2,7 +2,8 @@
 
 POST /api/scenes/{scene}/depth, POST /api/scenes/{scene}/views, POST /api/match and POST
 /api/scenes/{scene}/match (the same, its patches weighted by the scene's splats about the
-click: gsgeo.aim.foreground). The scene routes read the scene's splats, so they need its
+click: gsgeo.aim.foreground), POST /api/snap (a click snapped onto the point feature it was
+near: gsgeo.aim.snap). The scene routes read the scene's splats, so they need its
 tiles on this server: 404 for an unknown scene, 409 when its tiles are served from a static
 host. Matches run in the server's bounded pool of image jobs (gsgeo.server.jobs): a few at
 once, a few more queued, any beyond answered 503 with Retry-After; their views' pixels are
@@ -30,6 +31,7 @@ from gsgeo.service.aiming import (
     MAX_VISIBILITY_POINTS,
     depth_on_ray,
     match_views,
+    snap_reference,
     views_for_point,
     visibility,
 )
@@ -201,6 +203,28 @@ async def scene_match(scene: SceneName, body: MatchRequest, request: Request) ->
     return await image_jobs(request).run(match_views, body.reference.model_dump(),
                                          body.target.model_dump(), body.depth.model_dump(),
                                          folder, body.model_matrix)
+
+
+class SnapRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    reference: ReferenceView
+
+
+class SnapAnswer(BaseModel):
+    ok: bool
+    pixel: list[float] = Field(description="window coordinates: the feature when ok, else "
+                                           "the click")
+    moved_px: float = Field(description="how far the click moved (px)")
+    isotropy: float | None = Field(description="the structure tensor's smaller eigenvalue "
+                                               "over its larger one at the feature (0-1)")
+    reason: str | None = Field(description="why the click was not snapped")
+
+
+@router.post("/snap", response_model=SnapAnswer,
+             summary="Snap a click onto the point feature (a target's centre, a corner, a "
+                     "dot) within 3 px of it in its view, or say why not")
+async def snap(body: SnapRequest, request: Request) -> dict[str, Any]:
+    return await image_jobs(request).run(snap_reference, body.reference.model_dump())
 
 
 class ViewsRequest(BaseModel):

@@ -23,6 +23,7 @@ from gsgeo.aim.images import (
     image_header,
 )
 from gsgeo.aim.match import View, match_feature
+from gsgeo.aim.snap import snap_click
 from gsgeo.aim.splatindex import SplatIndex, scene_index
 from gsgeo.aim.views import suggest_views
 from gsgeo.crs.modelmatrix import invert_affine, matrix4
@@ -177,6 +178,19 @@ def match_views(reference: dict[str, Any], target: dict[str, Any],
     return match_feature(ref, pixel, tgt, near, far, hint,
                          None if normal is None else np.asarray(normal, dtype=np.float64),
                          foreground).to_json()
+
+
+def snap_reference(reference: dict[str, Any]) -> dict[str, Any]:
+    """The click of a reference view (image: base64 PNG or JPEG of the view or a crop of it,
+    origin, camera, pixel: window coordinates, CSS px) snapped onto the point feature it was
+    near (gsgeo.aim.snap: a target's centre, a corner, a dot), as the JSON of POST
+    /api/snap: ok, pixel, moved_px, isotropy, reason. The image is budgeted like a match's
+    (MAX_MATCH_PIXELS, from its header before decoding); InputError names the field."""
+    head = image_header(reference["image"], "reference.image")
+    check_budget([head], MAX_MATCH_PIXELS)
+    ref = view_of(reference, "reference", head)
+    pixel = np.asarray(reference["pixel"], dtype=np.float64)
+    return snap_click(ref.image, ref.origin, pixel).to_json()
 
 
 def views_for_point(scene_dir: Path, rays: Rays, point: Any, k: int, fovy: float,

@@ -19,7 +19,7 @@
 // position of its top-left corner.
 
 import { api } from "./api.js";
-import { autoAimDeclined, autoAimSummary } from "./autoaimtext.js";
+import { autoAimDeclined, autoAimSummary, snapText } from "./autoaimtext.js";
 import { fixed, h } from "./format.js";
 import { currentCamera, project, requestDepth } from "./guide.js";
 import { add, norm, scale } from "./linalg.js";
@@ -44,6 +44,7 @@ const VIEW_TIMEOUT_MS = 120000;
 const references = new WeakMap(); // ray 1 object -> Promise of {camera, image, origin, pixel}
 const cameras = new WeakMap(); // ray 1 object -> the Camera it was clicked from
 const thumbs = new WeakMap(); // auto ray object -> data URL of its match thumbnail
+const snaps = new WeakMap(); // ray 1 snapped onto its feature -> how far it moved (px)
 
 /** The thumbnail (PNG data URL) of auto ray `ray`'s match: the target crop around the matched
  *  pixel, marked; null for a clicked ray. */
@@ -304,6 +305,44 @@ function rayAt(ctx, camera, pixel, score) {
   return ray ? { ...ray, auto: true, score } : null;
 }
 
+/** Smallest move (px) of a snap that replaces ray 1. */
+const SNAP_MIN_PX = 0.05;
+
+/** Ray 1 `ray1` of measurement `m` snapped onto the point feature its click was near in its
+ *  reference view `ref` (POST /api/snap): the new ray 1 (through the feature, from the same
+ *  camera) replaces it in `m` and takes over its reference, camera and thumbnail; returns
+ *  {ray, ref, moved_px}, or null when the click stays (no point feature near it, the server
+ *  said no, or it was on the feature already). */
+async function snapRay1(ctx, m, ray1, ref) {
+  let ans = null;
+  try {
+    ans = await api("POST", "/snap", { reference: { image: ref.image, origin: ref.origin, camera: ref.camera, pixel: ref.pixel } });
+  } catch (exc) {
+    return null;
+  }
+  if (!ans || !ans.ok || !(ans.moved_px >= SNAP_MIN_PX) || m.rays[0] !== ray1) return null;
+  const cam = new Cesium.Camera(ctx.viewer.scene);
+  cam.frustum = ctx.viewer.camera.frustum.clone();
+  const c = ref.camera;
+  cam.setView({ destination: c3(c.position), orientation: { direction: c3(c.direction), up: c3(c.up) } });
+  const made = captureRay({ camera: cam, scene: ctx.viewer.scene }, new Cesium.Cartesian2(ans.pixel[0], ans.pixel[1]),
+    ray1.model_matrix || ctx.modelMatrix());
+  if (!made) return null;
+  const ray = { ...ray1, ...made };
+  const snappedRef = { ...ref, pixel: ans.pixel };
+  m.rays[0] = ray;
+  references.set(ray, Promise.resolve(snappedRef));
+  cameras.set(ray, cameras.get(ray1) || ref.camera);
+  if (thumbs.has(ray1)) thumbs.set(ray, thumbs.get(ray1));
+  snaps.set(ray, ans.moved_px);
+  return { ray, ref: snappedRef, moved_px: ans.moved_px };
+}
+
+/** How far (px) ray 1 `ray` was moved onto its feature by auto-aim, or 0. */
+export function snappedBy(ray) {
+  return snaps.get(ray) || 0;
+}
+
 /** The thumbnail of a match: the target crop around `pixel` (window coords) with a cross on it. */
 function thumbnail(crop, origin, pixel) {
   const size = 2 * THUMB_HALF;
@@ -358,7 +397,7 @@ export async function autoAim(ctx, changed = () => {}) {
     return;
   }
   if (running) { ctx.message("Auto-aim is already under way."); return; }
-  const ray1 = m.rays[0];
+  let ray1 = m.rays[0];
   const t0 = performance.now();
   const at = () => Math.round(performance.now() - t0);
   const timings = { views: [] };
@@ -391,13 +430,19 @@ export async function autoAim(ctx, changed = () => {}) {
     // taken again at ray 1's camera when the capture at the click failed
     if (!references.has(ray1) && cameras.has(ray1)) rememberReference(ctx, ray1);
     const refP = references.get(ray1);
+    if (!refP) throw new Error("ray 1's view is not known (a reopened point): click the feature for a new ray 1");
+    let ref = await refP;
+    timings.reference = at();
+    // ray 1 onto the point feature the click was near (a target's centre, a corner): every
+    // auto ray finds what ray 1 hits, so a click a pixel off would be a pixel off in all
+    const snapped = await snapRay1(ctx, m, ray1, ref);
+    timings.snapped = at();
+    if (snapped) ({ ray: ray1, ref } = snapped);
+    result.snap = snapped ? snapped.moved_px : 0;
     const depth = await requestDepth(ctx, ray1);
     timings.depth = at();
     if (!depth) throw new Error("the server gives no depth along ray 1 (is the scene on this server?)");
     if (!depth.hit) throw new Error(`ray 1 ${depth.reason || "hits no splat (sky?)"}`);
-    if (!refP) throw new Error("ray 1's view is not known (a reopened point): click the feature for a new ray 1");
-    const ref = await refP;
-    timings.reference = at();
     images.push(ref.image);
     const cam = ref.camera;
     const res = await api("POST", `/scenes/${scene}/views`, {
@@ -467,7 +512,7 @@ export async function autoAim(ctx, changed = () => {}) {
     if (moved && home) setCamera(viewer, home);
     if (held) held.release(viewer.camera);
     back();
-    window.gsgeo.autoaim = { last: { ...timings, added: result.added, declined: declined.map((x) => x.reason), text: result.text }, images };
+    window.gsgeo.autoaim = { last: { ...timings, added: result.added, declined: declined.map((x) => x.reason), text: result.text, snap_px: result.snap || 0 }, images };
     if (state.measure === m) changed(result.added > 0);
     ctx.updateStatus();
   }
@@ -480,14 +525,20 @@ export function autoAimPanel(m) {
   if (!r || !r.text) return null;
   const lines = r.running || !r.declined.length ? [r.text]
     : [`Auto-aim: ${r.added} ray${r.added === 1 ? "" : "s"} added.`, ...r.declined.map((x) => `declined ${x.reason}`)];
+  if (!r.running && r.snap) lines.push(snapText(r.snap));
   return h("div", { class: r.running ? "note" : (r.added ? "note" : "warn"), id: "autoaim-report" },
     ...lines.map((t) => h("div", {}, t)));
 }
 
 /** What the ray table's first cell adds for ray `ray`: for an auto ray its match thumbnail
- *  and "auto 0.93" (its score); nothing for a click. */
+ *  and "auto 0.93" (its score); for a click auto-aim snapped, "snapped 1.4 px"; nothing for
+ *  another click. */
 export function rayBadge(ray) {
-  if (!ray.auto) return [];
+  if (!ray.auto) {
+    const px = snappedBy(ray);
+    return px ? [h("span", { class: "autoaim-score", title: "auto-aim moved this click onto the point feature beside it" },
+      ` snapped ${fixed(px, 1)} px`)] : [];
+  }
   const src = thumbOf(ray);
   return [
     src ? h("img", { src, class: "autoaim-thumb", width: 2 * THUMB_HALF, height: 2 * THUMB_HALF,

@@ -23,3 +23,9 @@ export function autoAimDeclined(reason) {
 export function tooFewRays(name, n) {
   return `Nothing stored: ${name} has ${n} ray${n === 1 ? "" : "s"} and a point needs 2 or more. ${n ? CLICK_ANOTHER : "Click the feature to add ray 1."}`;
 }
+
+/** What the panel says when auto-aim moved ray 1 `px` pixels onto the feature its click was
+ *  near (a target's centre, a corner) before looking for it in other views. */
+export function snapText(px) {
+  return `Ray 1 moved ${px.toFixed(1)} px onto the point feature it was clicked beside.`;
+}
