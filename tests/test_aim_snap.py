@@ -101,3 +101,21 @@ def test_a_click_at_the_edge_of_its_image_is_left_alone():
     img = drawn(checker)
     s = snap_click(img, ORIGIN, ORIGIN + np.array([2.0, 30.0]))
     assert not s.ok and "edge of its image" in s.reason
+
+
+def test_a_corner_seen_only_in_colour_is_placed_by_its_colours():
+    """A red roof's corner against a grey of the same brightness (an eaves corner against a
+    wall): grey alone has nothing to snap to; the colour image, projected on its colours'
+    principal axis, puts the click on the corner."""
+    red, grey = np.array([0.1, 0.1, 0.8]), np.array([0.29, 0.29, 0.29])  # BGR, luma ~0.29 both
+    inside = drawn(corner) / 255.0
+    share = (inside - inside.min()) / (inside.max() - inside.min())
+    bgr = (share[..., None] * red + (1 - share[..., None]) * grey) * 255
+    luma = cv2.cvtColor(bgr.astype(np.float32), cv2.COLOR_BGR2GRAY)
+    assert np.ptp(luma) < 0.05 * np.ptp(bgr)
+    truth = FEATURE + ORIGIN
+    for click in clicks_about(truth, 1.5):
+        assert not snap_click(luma, ORIGIN, click).ok
+        s = snap_click(bgr.astype(np.float32), ORIGIN, click)
+        assert s.ok, s.reason
+        assert np.linalg.norm(s.pixel - truth) < 0.25

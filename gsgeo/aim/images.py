@@ -92,17 +92,19 @@ def check_budget(heads: list[ImageHeader], budget: int) -> None:
                 "click, and the epipolar segment's box)", field=h.field)
 
 
-def decode_header(head: ImageHeader) -> np.ndarray:
-    """The grey image (H, W) float32 of a checked header; InputError when the bytes do not
-    decode to the size the header states."""
+def decode_header(head: ImageHeader, colour: bool = False) -> np.ndarray:
+    """The grey image (H, W) float32 of a checked header, or with ``colour`` its BGR image
+    (H, W, 3); grey levels 0-255 either way. InputError when the bytes do not decode to the
+    size the header states."""
+    flag = cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
     try:
-        img = cv2.imdecode(np.frombuffer(head.raw, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+        img = cv2.imdecode(np.frombuffer(head.raw, dtype=np.uint8), flag)
     except cv2.error:
         img = None
-    if img is None or img.ndim != 2 or img.size == 0:
+    if img is None or img.ndim != (3 if colour else 2) or img.size == 0:
         raise InputError("cannot be decoded as a PNG or JPEG image (truncated?)",
                          field=head.field)
-    if img.shape != (head.height, head.width):
+    if img.shape[:2] != (head.height, head.width):
         raise InputError(f"decodes to {img.shape[1]}x{img.shape[0]} px, not the "
                          f"{head.width}x{head.height} of its header", field=head.field)
     scale = 1.0 / 257.0 if img.dtype == np.uint16 else 1.0

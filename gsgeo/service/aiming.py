@@ -126,10 +126,12 @@ def camera_of(doc: dict[str, Any], field: str) -> Camera:
                           float(doc["width"]), float(doc["height"]), field)
 
 
-def view_of(doc: dict[str, Any], field: str, head: ImageHeader | None = None) -> View:
+def view_of(doc: dict[str, Any], field: str, head: ImageHeader | None = None,
+            colour: bool = False) -> View:
     """A rendered view of a JSON object (image: base64 PNG/JPEG, origin, camera); ``head``:
-    its image's header when already read (gsgeo.aim.images.image_header). The image is
-    decoded only once its size is checked against the camera's canvas."""
+    its image's header when already read (gsgeo.aim.images.image_header); its image grey, or
+    BGR with ``colour``. The image is decoded only once its size is checked against the
+    camera's canvas."""
     origin = np.asarray(doc.get("origin") or [0.0, 0.0], dtype=np.float64)
     head = head or image_header(doc["image"], f"{field}.image")
     camera = camera_of(doc["camera"], f"{field}.camera")
@@ -140,7 +142,7 @@ def view_of(doc: dict[str, Any], field: str, head: ImageHeader | None = None) ->
         raise InputError(f"is {w}x{h} px at origin ({origin[0]:g}, {origin[1]:g}), beyond the "
                          f"{camera.width:g}x{camera.height:g} canvas of its camera: send the "
                          "view (or a crop of it) in CSS pixels, as the camera", field=f"{field}.image")
-    return View(decode_header(head), origin, camera)
+    return View(decode_header(head, colour), origin, camera)
 
 
 def match_views(reference: dict[str, Any], target: dict[str, Any],
@@ -188,7 +190,7 @@ def snap_reference(reference: dict[str, Any]) -> dict[str, Any]:
     (MAX_MATCH_PIXELS, from its header before decoding); InputError names the field."""
     head = image_header(reference["image"], "reference.image")
     check_budget([head], MAX_MATCH_PIXELS)
-    ref = view_of(reference, "reference", head)
+    ref = view_of(reference, "reference", head, colour=True)
     pixel = np.asarray(reference["pixel"], dtype=np.float64)
     return snap_click(ref.image, ref.origin, pixel).to_json()
 
