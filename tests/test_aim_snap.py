@@ -119,3 +119,22 @@ def test_a_corner_seen_only_in_colour_is_placed_by_its_colours():
         s = snap_click(bgr.astype(np.float32), ORIGIN, click)
         assert s.ok, s.reason
         assert np.linalg.norm(s.pixel - truth) < 0.25
+
+
+def test_a_corner_in_brightness_under_strong_colour_noise_is_placed_by_its_brightness():
+    """A dark corner on grass whose colours vary more than its brightness steps (the colours'
+    principal axis runs along the noise): the brightness places it."""
+    luma = np.array([0.114, 0.587, 0.299])
+    chroma = np.cross(luma, [1.0, 0.0, 0.0])
+    chroma /= np.linalg.norm(chroma)  # a colour change that keeps the brightness
+    share = drawn(corner) / 255.0
+    rng = np.random.default_rng(7)
+    noise = cv2.GaussianBlur(rng.normal(0, 1, share.shape), (0, 0), 0.8)
+    noise *= 0.45 / noise.std()
+    bgr = 0.35 + (share[..., None] - 0.5) * 0.25 * luma / luma.sum() * 3 + noise[..., None] * chroma
+    bgr = (np.clip(bgr, 0, 1) * 255).astype(np.float32)
+    truth = FEATURE + ORIGIN
+    for click in clicks_about(truth, 1.5):
+        s = snap_click(bgr, ORIGIN, click)
+        assert s.ok, s.reason
+        assert np.linalg.norm(s.pixel - truth) < 0.3

@@ -17,10 +17,12 @@ flat patch, so the snap is kept only when
 - it lies within ``MAX_SHIFT_PX`` of the click (a person misses by a pixel or two; a feature
   further away is another one).
 
-A colour image is first projected onto its colours' principal axis in the 21 x 21 pixels
-about the click: a red roof against a grey wall differ in colour more than in brightness (an
-eaves corner that grey alone cannot place). Otherwise the click stays as it was, with the
-reason. Pixel coordinates are window
+A colour image is tried twice: projected onto its colours' principal axis in the 21 x 21
+pixels about the click (a red roof against a grey wall differ in colour more than in
+brightness: an eaves corner that grey alone cannot place) and as its brightness (a dark pole
+top on green grass, where the principal axis runs along the grass's own variation). Where
+both place the feature the one nearer the click is kept; where neither does, the click stays
+as it was, with the reason. Pixel coordinates are window
 coordinates (CSS px, x right, y down; a pixel's centre at +0.5) like the clicks'.
 """
 
@@ -99,7 +101,7 @@ def principal_projection(image: np.ndarray, at: FloatArray, half: int = COLOUR_H
 def snap_click(image: np.ndarray, origin: FloatArray, click: FloatArray,
                max_shift_px: float = MAX_SHIFT_PX) -> Snap:
     """The point feature at or near ``click`` (window coordinates, px) in ``image`` (H, W
-    grey or H, W, 3 colour; levels 0-255) whose top-left corner is at window position
+    grey or H, W, 3 BGR colour; levels 0-255) whose top-left corner is at window position
     ``origin``; the click itself with the reason when there is none to snap to (see the
     module's tests)."""
     click = np.asarray(click, dtype=np.float64)
@@ -108,8 +110,21 @@ def snap_click(image: np.ndarray, origin: FloatArray, click: FloatArray,
     margin = max(WINDOW_HALF + max_shift_px + 3, COLOUR_HALF + 1)
     if not (margin <= local[0] <= w - margin and margin <= local[1] <= h - margin):
         return Snap(False, click, reason="the click is too near the edge of its image")
-    img = principal_projection(image, local) if image.ndim == 3 else image
-    img = np.ascontiguousarray(img, dtype=np.float32)
+    if image.ndim == 2:
+        return snap_channel(image, origin, click, max_shift_px)
+    bgr = np.asarray(image, dtype=np.float32)
+    brightness = bgr @ np.array([0.114, 0.587, 0.299], dtype=np.float32)
+    tries = [snap_channel(principal_projection(bgr, local), origin, click, max_shift_px),
+             snap_channel(brightness, origin, click, max_shift_px)]
+    placed = [t for t in tries if t.ok]
+    return min(placed, key=lambda t: t.moved_px) if placed else tries[0]
+
+
+def snap_channel(image: np.ndarray, origin: FloatArray, click: FloatArray,
+                 max_shift_px: float = MAX_SHIFT_PX) -> Snap:
+    """snap_click on one channel ``image`` (H, W), the click already checked to lie inside."""
+    local = click - np.asarray(origin, dtype=np.float64)
+    img = np.ascontiguousarray(image, dtype=np.float32)
     # OpenCV's corner functions take pixel centres at integers
     starts = (local - 0.5 + STARTS).astype(np.float32).reshape(-1, 1, 2)
     ends = cv2.cornerSubPix(img, starts.copy(), (WINDOW_HALF, WINDOW_HALF), (-1, -1), CRITERIA)
