@@ -222,7 +222,7 @@ class SnapAnswer(BaseModel):
 
 @router.post("/snap", response_model=SnapAnswer,
              summary="Snap a click onto the point feature (a target's centre, a corner, a "
-                     "dot) within 3 px of it in its view, or say why not")
+                     "dot) within 2.5 px of it in its view, or say why not")
 async def snap(body: SnapRequest, request: Request) -> dict[str, Any]:
     return await image_jobs(request).run(snap_reference, body.reference.model_dump())
 

@@ -296,12 +296,18 @@ function awayFromView(ctx) {
   };
 }
 
-/** The ray (session JSON, marked auto) through window position `pixel` of view `camera`. */
-function rayAt(ctx, camera, pixel, score) {
+/** The ray (session JSON) through window position `pixel` of view `camera` (a view's camera
+ *  JSON), in the frame of `modelMatrix` (16 numbers), or null. */
+function rayThrough(ctx, camera, pixel, modelMatrix) {
   const cam = new Cesium.Camera(ctx.viewer.scene);
   cam.frustum = ctx.viewer.camera.frustum.clone();
   cam.setView({ destination: c3(camera.position), orientation: { direction: c3(camera.direction), up: c3(camera.up) } });
-  const ray = captureRay({ camera: cam, scene: ctx.viewer.scene }, new Cesium.Cartesian2(pixel[0], pixel[1]), ctx.modelMatrix());
+  return captureRay({ camera: cam, scene: ctx.viewer.scene }, new Cesium.Cartesian2(pixel[0], pixel[1]), modelMatrix);
+}
+
+/** The ray (session JSON, marked auto) through window position `pixel` of view `camera`. */
+function rayAt(ctx, camera, pixel, score) {
+  const ray = rayThrough(ctx, camera, pixel, ctx.modelMatrix());
   return ray ? { ...ray, auto: true, score } : null;
 }
 
@@ -321,12 +327,7 @@ async function snapRay1(ctx, m, ray1, ref) {
     return null;
   }
   if (!ans || !ans.ok || !(ans.moved_px >= SNAP_MIN_PX) || m.rays[0] !== ray1) return null;
-  const cam = new Cesium.Camera(ctx.viewer.scene);
-  cam.frustum = ctx.viewer.camera.frustum.clone();
-  const c = ref.camera;
-  cam.setView({ destination: c3(c.position), orientation: { direction: c3(c.direction), up: c3(c.up) } });
-  const made = captureRay({ camera: cam, scene: ctx.viewer.scene }, new Cesium.Cartesian2(ans.pixel[0], ans.pixel[1]),
-    ray1.model_matrix || ctx.modelMatrix());
+  const made = rayThrough(ctx, ref.camera, ans.pixel, ray1.model_matrix || ctx.modelMatrix());
   if (!made) return null;
   const ray = { ...ray1, ...made };
   const snappedRef = { ...ref, pixel: ans.pixel };
@@ -339,7 +340,7 @@ async function snapRay1(ctx, m, ray1, ref) {
 }
 
 /** How far (px) ray 1 `ray` was moved onto its feature by auto-aim, or 0. */
-export function snappedBy(ray) {
+function snappedBy(ray) {
   return snaps.get(ray) || 0;
 }
 
