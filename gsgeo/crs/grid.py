@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike
 from pyproj.exceptions import ProjError
 
 from gsgeo.crs.confidence import ellipse_95, ellipsoid_axes_95
+from gsgeo.crs.ellipsoid import WGS84_A, WGS84_F
 from gsgeo.crs.frames import ecef_to_geodetic, enu_rotation, geodetic_jacobian
 from gsgeo.crs.geoid import load_geoid
 from gsgeo.crs.resolve import GridCRS, SourceCRS, grid_crs, source_crs
@@ -486,9 +487,8 @@ def scale_factors(lon: ArrayLike, lat: ArrayLike, h: ArrayLike, crs: str) -> Sca
     # the square root of the areal scale: k itself where the projection is conformal (areal =
     # k squared), an average over directions where it is not
     k = np.sqrt(np.asarray(fac.areal_scale, dtype=np.float64))
-    a, f = 6378137.0, 1.0 / 298.257223563
-    e2 = f * (2.0 - f)
+    e2 = WGS84_F * (2.0 - WGS84_F)
     s2 = np.sin(np.radians(lat_a)) ** 2
-    radius = a * np.sqrt(1.0 - e2) / (1.0 - e2 * s2)  # sqrt(M N)
+    radius = WGS84_A * np.sqrt(1.0 - e2) / (1.0 - e2 * s2)  # sqrt(M N)
     elev = radius / (radius + h_a)
     return ScaleFactors(point=k, elevation=elev, combined=k * elev)

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from gsgeo.crs.grid import scale_factors
 from gsgeo.crs.modelmatrix import column_major
 from gsgeo.errors import CRSError, GsgeoError, InputError
 from gsgeo.georef.fit import georeference as fit_control
@@ -1206,8 +1207,6 @@ def ground_measures(m: JSONObject, recs: Sequence[JSONObject], crs: str) -> JSON
     scale_factors) at the mean longitude, latitude and ellipsoidal height of the feature's
     points (``recs``, point-schema records), areas by its square; with the factors used.
     Empty when the points carry no WGS 84 position."""
-    from gsgeo.crs.grid import scale_factors
-
     try:
         llh = np.array([[r["lon"], r["lat"], r["h_wgs84"]] for r in recs], dtype=float)
     except (KeyError, TypeError):
